@@ -1,0 +1,39 @@
+"""depthnormals: surface normals from depth images.
+
+Public API
+----------
+estimate_normals, methods          the dispatcher over every registered estimator
+three_filters_to_normal, d2nt, ... one function per estimator
+angular_error, normal_metrics      evaluation
+Intrinsics, backproject            the camera
+datasets, io                       readers and writers
+
+``import depthnormals`` stays light: no torch, no matplotlib.
+"""
+
+from __future__ import annotations
+
+from . import datasets, io
+from .camera import Intrinsics, as_intrinsics, backproject
+from .estimators import d2nt, three_filters_to_normal
+from .metrics import NormalMetrics, angular_error, normal_metrics
+from .registry import estimate_normals, get_estimator, methods
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Intrinsics",
+    "NormalMetrics",
+    "__version__",
+    "angular_error",
+    "as_intrinsics",
+    "backproject",
+    "d2nt",
+    "datasets",
+    "estimate_normals",
+    "get_estimator",
+    "io",
+    "methods",
+    "normal_metrics",
+    "three_filters_to_normal",
+]

@@ -1,0 +1,82 @@
+"""Shared input checkers: always on, and each message says what to pass instead."""
+
+from __future__ import annotations
+
+import numbers
+from typing import Any
+
+import numpy as np
+
+__all__ = ["check_depth", "check_normals", "check_positive", "check_choice"]
+
+
+def check_positive(value: Any, name: str, *, allow_none: bool = False) -> float | None:
+    """Return ``value`` as a finite positive float, or raise ValueError/TypeError."""
+    if value is None and allow_none:
+        return None
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name} must be a positive real number; got {type(value).__name__}")
+    value = float(value)
+    if not np.isfinite(value) or value <= 0:
+        raise ValueError(f"{name} must be finite and > 0; got {value!r}")
+    return value
+
+
+def check_choice(value: Any, name: str, choices: tuple[str, ...] | list[str]) -> str:
+    """Return ``value`` if it is one of ``choices`` (strings), else raise ValueError listing them."""
+    if not isinstance(value, str):
+        raise TypeError(f"{name} must be a string, one of {sorted(choices)}; got {value!r}")
+    if value not in choices:
+        raise ValueError(f"unknown {name} {value!r}; valid choices: {', '.join(choices)}")
+    return value
+
+
+def check_depth(depth: Any, *, depth_scale: float | None = None, name: str = "depth") -> np.ndarray:
+    """Validate a depth map and return it as a native-endian, C-contiguous float array.
+
+    float32 and float64 are preserved (float16 becomes float32); integer depth needs an
+    explicit ``depth_scale`` (metres per unit, e.g. 0.001 for millimetres) and becomes float32.
+    Invalid values (0, negative, NaN, inf) are kept as they are: estimators mask them.
+    """
+    if isinstance(depth, (str, bytes)) or depth is None:
+        raise TypeError(f"{name} must be a 2-D numeric array (H, W); got {type(depth).__name__}")
+    arr = depth if isinstance(depth, np.ndarray) else np.asarray(depth)
+    if arr.dtype == bool or arr.dtype.kind not in "iuf":
+        raise TypeError(
+            f"{name} must hold real numbers (float32/float64, or integers with depth_scale); "
+            f"got dtype {arr.dtype}"
+        )
+    if arr.ndim != 2:
+        hint = f" (use {name}[..., 0] for a single-channel image)" if arr.ndim == 3 else ""
+        raise ValueError(f"{name} must be a 2-D array (H, W); got shape {arr.shape}{hint}")
+    if arr.size == 0:
+        raise ValueError(f"{name} is empty (shape {arr.shape}); it needs at least one pixel")
+    scale = check_positive(depth_scale, "depth_scale", allow_none=True)
+    if arr.dtype.kind in "iu":
+        if scale is None:
+            raise TypeError(
+                f"{name} has integer dtype {arr.dtype}; pass depth_scale (metres per unit, "
+                "e.g. depth_scale=0.001 for millimetres) so nothing is rescaled silently"
+            )
+        return np.ascontiguousarray(arr.astype(np.float64) * scale, dtype=np.float32)
+    if arr.dtype.itemsize < 4:
+        arr = arr.astype(np.float32)
+    dtype = arr.dtype.newbyteorder("=")
+    out = np.ascontiguousarray(arr, dtype=dtype)
+    if scale is not None and scale != 1.0:
+        out = out * out.dtype.type(scale)
+    return out
+
+
+def check_normals(normals: Any, *, name: str = "normals", shape: tuple[int, int] | None = None) -> np.ndarray:
+    """Validate a normal map (H, W, 3) of real numbers; return it as a float array."""
+    arr = normals if isinstance(normals, np.ndarray) else np.asarray(normals)
+    if arr.dtype == bool or arr.dtype.kind not in "iuf":
+        raise TypeError(f"{name} must be a real (H, W, 3) array; got dtype {arr.dtype}")
+    if arr.ndim != 3 or arr.shape[2] != 3:
+        raise ValueError(f"{name} must have shape (H, W, 3); got {arr.shape}")
+    if arr.size == 0:
+        raise ValueError(f"{name} is empty (shape {arr.shape})")
+    if shape is not None and arr.shape[:2] != tuple(shape):
+        raise ValueError(f"{name} has size {arr.shape[:2]} but depth has size {tuple(shape)}; they must match")
+    return arr

@@ -1,0 +1,68 @@
+"""Shared pieces of every estimator: input preparation and compiled finishing kernels.
+
+Inside the kernels invalid depth is NaN (see :func:`prepare`), so ``z == z`` tests validity.
+All arithmetic is float64 in registers; outputs are float32.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numba as nb
+import numpy as np
+
+from .._validate import check_depth
+from ..camera import Intrinsics, as_intrinsics
+
+__all__ = ["finish", "new_output", "prepare", "store_normal"]
+
+
+def prepare(depth: Any, K: Any, depth_scale: float | None) -> tuple[np.ndarray, Intrinsics]:
+    """Validate inputs; return depth as a C-contiguous float array with NaN at invalid pixels."""
+    z = check_depth(depth, depth_scale=depth_scale)
+    cam = as_intrinsics(K)
+    bad = ~(np.isfinite(z) & (z > 0))
+    if bad.any():
+        z = np.where(bad, z.dtype.type(np.nan), z)
+    return z, cam
+
+
+def new_output(shape: tuple[int, int]) -> np.ndarray:
+    """An (H, W, 3) float32 array filled with NaN."""
+    return np.full((shape[0], shape[1], 3), np.nan, dtype=np.float32)
+
+
+@nb.njit(cache=True, inline="always")
+def store_normal(out, v, u, nx, ny, nz, px, py, pz):
+    """Normalise (nx, ny, nz), orient it toward the camera (dot with the point < 0), store it.
+
+    Writes NaN when the vector is not finite or has zero length.
+    """
+    norm = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if not (norm > 0.0) or not math.isfinite(norm):
+        out[v, u, 0] = np.nan
+        out[v, u, 1] = np.nan
+        out[v, u, 2] = np.nan
+        return
+    if nx * px + ny * py + nz * pz > 0.0:
+        norm = -norm
+    out[v, u, 0] = nx / norm
+    out[v, u, 1] = ny / norm
+    out[v, u, 2] = nz / norm
+
+
+@nb.njit(cache=True, parallel=True)
+def finish(normals, z, fx, fy, cx, cy):
+    """Renormalise and orient a float normal map in place (NaN where z is invalid)."""
+    h, w = z.shape
+    for v in nb.prange(h):
+        for u in range(w):
+            zz = z[v, u]
+            if not (zz == zz):
+                normals[v, u, 0] = np.nan
+                normals[v, u, 1] = np.nan
+                normals[v, u, 2] = np.nan
+                continue
+            store_normal(normals, v, u, normals[v, u, 0], normals[v, u, 1], normals[v, u, 2],
+                         (u - cx) * zz / fx, (v - cy) * zz / fy, zz)
