@@ -1,0 +1,7 @@
+"""``python -m depthnormals``."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())
