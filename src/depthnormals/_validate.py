@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["check_depth", "check_normals", "check_positive", "check_choice"]
+__all__ = ["check_choice", "check_depth", "check_normals", "check_positive"]
 
 
 def check_positive(value: Any, name: str, *, allow_none: bool = False) -> float | None:
@@ -68,7 +68,8 @@ def check_depth(depth: Any, *, depth_scale: float | None = None, name: str = "de
     return out
 
 
-def check_normals(normals: Any, *, name: str = "normals", shape: tuple[int, int] | None = None) -> np.ndarray:
+def check_normals(normals: Any, *, name: str = "normals",
+                  shape: tuple[int, int] | None = None) -> np.ndarray:
     """Validate a normal map (H, W, 3) of real numbers; return it as a float array."""
     arr = normals if isinstance(normals, np.ndarray) else np.asarray(normals)
     if arr.dtype == bool or arr.dtype.kind not in "iuf":
@@ -78,5 +79,6 @@ def check_normals(normals: Any, *, name: str = "normals", shape: tuple[int, int]
     if arr.size == 0:
         raise ValueError(f"{name} is empty (shape {arr.shape})")
     if shape is not None and arr.shape[:2] != tuple(shape):
-        raise ValueError(f"{name} has size {arr.shape[:2]} but depth has size {tuple(shape)}; they must match")
+        raise ValueError(
+            f"{name} has size {arr.shape[:2]} but the other map has size {tuple(shape)}; they must match")
     return arr

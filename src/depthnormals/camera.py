@@ -74,7 +74,7 @@ class Intrinsics:
                           (self.cx + 0.5) * factor - 0.5, (self.cy + 0.5) * factor - 0.5)
 
 
-IntrinsicsLike = Union[Intrinsics, np.ndarray, Sequence[float], Mapping[str, float]]
+IntrinsicsLike = Union[Intrinsics, np.ndarray, Sequence[float], Mapping[str, float]]  # noqa: UP007
 
 
 def as_intrinsics(K: Any) -> Intrinsics:

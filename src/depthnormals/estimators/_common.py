@@ -45,11 +45,12 @@ def store_normal(out, v, u, nx, ny, nz, px, py, pz):
         out[v, u, 1] = np.nan
         out[v, u, 2] = np.nan
         return
+    inv = 1.0 / norm
     if nx * px + ny * py + nz * pz > 0.0:
-        norm = -norm
-    out[v, u, 0] = nx / norm
-    out[v, u, 1] = ny / norm
-    out[v, u, 2] = nz / norm
+        inv = -inv
+    out[v, u, 0] = nx * inv
+    out[v, u, 1] = ny * inv
+    out[v, u, 2] = nz * inv
 
 
 @nb.njit(cache=True, parallel=True)

@@ -14,7 +14,7 @@ import math
 import numba as nb
 import numpy as np
 
-__all__ = ["KERNELS", "gradient_kernels", "stencil_derivative", "roberts_gradient"]
+__all__ = ["KERNELS", "gradient_kernels", "roberts_gradient", "stencil_derivative"]
 
 #: Gradient kernels of the 3F2N family, with their smoothing taps (``None``: no smoothing).
 #: Correctly named: Scharr smooths with (3, 10, 3), Prewitt with (1, 1, 1).
@@ -70,7 +70,7 @@ def _at(D, r, c):
     return D[r, c]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def stencil_derivative(D, v, u, a_v, a_u, deriv, smooth):
     """Derivative of D at (v, u) along (a_v, a_u), smoothed across it; NaN-aware."""
     md = deriv.size // 2
@@ -115,7 +115,7 @@ def stencil_derivative(D, v, u, a_v, a_u, deriv, smooth):
     return np.nan
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def roberts_gradient(D, v, u):
     """(d/du, d/dv) of D from the first fully valid 2x2 Roberts cross around (v, u).
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numba as nb
@@ -9,7 +10,7 @@ import numpy as np
 
 from .._validate import check_choice
 from ..registry import register
-from ._common import new_output, prepare, store_normal
+from ._common import prepare, store_normal
 from ._stencils import KERNELS, gradient_kernels, roberts_gradient, stencil_derivative
 
 __all__ = ["AGGREGATES", "three_filters_to_normal"]
@@ -29,7 +30,7 @@ def _quantile_sorted(c, n, q):
     return c[lo] * (1.0 - f) + c[hi] * f
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def central_tendency(c, n, mode):
     """Central tendency of c[:n]: 0 median, 1 mean, 2 trimean, 3 trimmed mean (AGGREGATES order).
 
@@ -60,52 +61,187 @@ def central_tendency(c, n, mode):
     return s / (hi - lo)
 
 
-@nb.njit(cache=True, parallel=True)
-def _threefn_kernel(z, fx, fy, cx, cy, deriv, smooth, roberts, mode, nb_off, out):
+@nb.njit(cache=True, inline="always")
+def _cx(a, b):
+    return (a if a < b else b), (b if a < b else a)
+
+
+@nb.njit(cache=True, inline="always")
+def median8(a0, a1, a2, a3, a4, a5, a6, a7):
+    """Median of 8 values (mean of the 4th and 5th) by a branch-free sorting network."""
+    a0, a2 = _cx(a0, a2)
+    a1, a3 = _cx(a1, a3)
+    a4, a6 = _cx(a4, a6)
+    a5, a7 = _cx(a5, a7)
+    a0, a4 = _cx(a0, a4)
+    a1, a5 = _cx(a1, a5)
+    a2, a6 = _cx(a2, a6)
+    a3, a7 = _cx(a3, a7)
+    a0, a1 = _cx(a0, a1)
+    a2, a3 = _cx(a2, a3)
+    a4, a5 = _cx(a4, a5)
+    a6, a7 = _cx(a6, a7)
+    a2, a4 = _cx(a2, a4)
+    a3, a5 = _cx(a3, a5)
+    a1, a4 = _cx(a1, a4)
+    a3, a6 = _cx(a3, a6)
+    a3, a4 = _cx(a3, a4)
+    return 0.5 * (a3 + a4)
+
+
+@nb.njit(cache=True, inline="always")
+def _generic_pixel(z, D, v, u, fx, fy, cx, cy, deriv, smooth, roberts, mode, nb_off, cand, out):
     h, w = z.shape
-    D = 1.0 / z
+    zq = z[v, u]
+    if roberts:
+        gu, gv = roberts_gradient(D, v, u)
+    else:
+        gu = stencil_derivative(D, v, u, 0, 1, deriv, smooth)
+        gv = stencil_derivative(D, v, u, 1, 0, deriv, smooth)
+    xq = (u - cx) * zq / fx
+    yq = (v - cy) * zq / fy
+    if not (gu == gu and gv == gv):
+        out[v, u, 0] = np.nan
+        out[v, u, 1] = np.nan
+        out[v, u, 2] = np.nan
+        return
+    nx = fx * gu
+    ny = fy * gv
+    n = 0
+    for k in range(8):
+        r = v + nb_off[k, 0]
+        c = u + nb_off[k, 1]
+        if r < 0 or r >= h or c < 0 or c >= w:
+            continue
+        zn = z[r, c]
+        if not (zn == zn):
+            continue
+        dz = zn - zq
+        if dz == 0.0:
+            continue
+        dx = (c - cx) * zn / fx - xq
+        dy = (r - cy) * zn / fy - yq
+        cand[n] = -(nx * dx + ny * dy) / dz
+        n += 1
+    if n == 0:
+        nx = 0.0
+        ny = 0.0
+        nz = -1.0
+    else:
+        nz = central_tendency(cand, n, mode)
+    store_normal(out, v, u, nx, ny, nz, xq, yq, zq)
+
+
+# no-NaN/no-inf assumptions are never allowed: NaN marks invalid depth
+_FASTMATH = {"nsz", "contract", "arcp"}
+
+
+@nb.njit(cache=True, fastmath=_FASTMATH)
+def _fd_row(zp, zc, zn, v, fx, fy, cx, cy, mode, bx, by, bz, flag):
+    """Branch-free (vectorisable) FD 3F2N over the interior of one row.
+
+    ``nz_i = -(gu a + gv b) - (gu du_i + gv dv_i) z_i / (z_i - z_q)`` with a = u - cx,
+    b = v - cy: the 3F2N candidate rewritten without X and Y. ``flag[u]`` is set where any
+    neighbour is invalid or ties in depth (those pixels take the general path).
+    """
+    w = zc.size
+    b = v - cy
+    for u in range(1, w - 1):
+        zq = np.float64(zc[u])
+        z0 = np.float64(zp[u - 1])
+        z1 = np.float64(zp[u])
+        z2 = np.float64(zp[u + 1])
+        z3 = np.float64(zc[u - 1])
+        z4 = np.float64(zc[u + 1])
+        z5 = np.float64(zn[u - 1])
+        z6 = np.float64(zn[u])
+        z7 = np.float64(zn[u + 1])
+        gu = 0.5 * (1.0 / z4 - 1.0 / z3)
+        gv = 0.5 * (1.0 / z6 - 1.0 / z1)
+        d0 = z0 - zq
+        d1 = z1 - zq
+        d2 = z2 - zq
+        d3 = z3 - zq
+        d4 = z4 - zq
+        d5 = z5 - zq
+        d6 = z6 - zq
+        d7 = z7 - zq
+        t0 = (-gu - gv) * z0 / d0
+        t1 = -gv * z1 / d1
+        t2 = (gu - gv) * z2 / d2
+        t3 = -gu * z3 / d3
+        t4 = gu * z4 / d4
+        t5 = (gv - gu) * z5 / d5
+        t6 = gv * z6 / d6
+        t7 = (gu + gv) * z7 / d7
+        if mode == 0:
+            m = median8(t0, t1, t2, t3, t4, t5, t6, t7)
+        else:
+            m = 0.125 * (t0 + t1 + t2 + t3 + t4 + t5 + t6 + t7)
+        a = u - cx
+        nx = fx * gu
+        ny = fy * gv
+        nz = -(gu * a + gv * b) - m
+        nrm = math.sqrt(nx * nx + ny * ny + nz * nz)
+        inv = 1.0 / nrm
+        dot = gu * a + gv * b + nz  # dot(n, X) / z
+        inv = -inv if dot > 0.0 else inv
+        bx[u] = nx * inv
+        by[u] = ny * inv
+        bz[u] = nz * inv
+        prod = d0 * d1 * d2 * d3 * d4 * d5 * d6 * d7 * nrm * zq
+        flag[u] = not (prod == prod and prod != 0.0 and abs(prod) < np.inf)
+
+
+@nb.njit(cache=True, parallel=True)
+def _threefn_kernel(z, fx, fy, cx, cy, deriv, smooth, roberts, mode, fast_fd, nb_off, out):
+    h, w = z.shape
+    D = 1.0 / z.astype(np.float64)
     for v in nb.prange(h):
         cand = np.empty(8)
+        flag = np.ones(w, dtype=np.bool_)
+        if fast_fd and 0 < v < h - 1 and w > 2:
+            bx = np.empty(w)
+            by = np.empty(w)
+            bz = np.empty(w)
+            _fd_row(z[v - 1], z[v], z[v + 1], v, fx, fy, cx, cy, mode, bx, by, bz, flag)
+            for u in range(1, w - 1):
+                out[v, u, 0] = bx[u]
+                out[v, u, 1] = by[u]
+                out[v, u, 2] = bz[u]
         for u in range(w):
+            if not flag[u]:
+                continue
             zq = z[v, u]
             if not (zq == zq):
+                out[v, u, 0] = np.nan
+                out[v, u, 1] = np.nan
+                out[v, u, 2] = np.nan
                 continue
-            if roberts:
-                gu, gv = roberts_gradient(D, v, u)
-            else:
-                gu = stencil_derivative(D, v, u, 0, 1, deriv, smooth)
-                gv = stencil_derivative(D, v, u, 1, 0, deriv, smooth)
-            if not (gu == gu and gv == gv):
-                continue
-            nx = fx * gu
-            ny = fy * gv
-            xq = (u - cx) * zq / fx
-            yq = (v - cy) * zq / fy
-            n = 0
-            for k in range(8):
-                r = v + nb_off[k, 0]
-                c = u + nb_off[k, 1]
-                if r < 0 or r >= h or c < 0 or c >= w:
+            if fast_fd and 0 < v < h - 1 and 0 < u < w - 1:
+                # FD interior with ties in depth: candidates with dz = 0 dropped
+                gu = 0.5 * (D[v, u + 1] - D[v, u - 1])
+                gv = 0.5 * (D[v + 1, u] - D[v - 1, u])
+                if gu == gu and gv == gv:
+                    n = 0
+                    for k in range(8):
+                        dv = nb_off[k, 0]
+                        du = nb_off[k, 1]
+                        zk = z[v + dv, u + du]
+                        dz = zk - zq
+                        if dz != 0.0 and dz == dz:
+                            cand[n] = (gu * du + gv * dv) * zk / dz
+                            n += 1
+                    a = u - cx
+                    b = v - cy
+                    if n == 0:
+                        store_normal(out, v, u, 0.0, 0.0, -1.0, a, b, fx)
+                    else:
+                        nz = -(gu * a + gv * b) - central_tendency(cand, n, mode)
+                        store_normal(out, v, u, fx * gu, fy * gv, nz, a * zq / fx, b * zq / fy, zq)
                     continue
-                zn = z[r, c]
-                if not (zn == zn):
-                    continue
-                dz = zn - zq
-                if dz == 0.0:
-                    continue
-                dx = (c - cx) * zn / fx - xq
-                dy = (r - cy) * zn / fy - yq
-                cand[n] = -(nx * dx + ny * dy) / dz
-                n += 1
-            if n == 0:
-                nx = 0.0
-                ny = 0.0
-                nz = -1.0
-            else:
-                nz = central_tendency(cand, n, mode)
-            store_normal(out, v, u, nx, ny, nz, xq, yq, zq)
-
-
+            _generic_pixel(z, D, v, u, fx, fy, cx, cy, deriv, smooth, roberts, mode, nb_off,
+                           cand, out)
 
 
 @register("3f2n")
@@ -177,7 +313,8 @@ def three_filters_to_normal(depth: Any, K: Any, *, kernel: str = "fd", kernel_si
         deriv, smooth = np.zeros(1), np.ones(1)
     else:
         deriv, smooth = gradient_kernels(kernel, kernel_size)
-    out = new_output(z.shape)
+    out = np.empty((*z.shape, 3), dtype=np.float32)
+    fast_fd = kernel == "fd" and kernel_size == 3 and mode in (0, 1)
     _threefn_kernel(z, cam.fx, cam.fy, cam.cx, cam.cy, deriv, smooth, kernel == "roberts",
-                    mode, _NB, out)
+                    mode, fast_fd, _NB, out)
     return out
