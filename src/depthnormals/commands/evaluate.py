@@ -1,0 +1,81 @@
+"""``depthnormals evaluate``: run estimators over a dataset and write tables and figures."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+HELP = ("evaluate estimators on a dataset: results.csv, summary tables, figures "
+        "(resumes an interrupted run)")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("dataset", type=Path,
+                        help="dataset folder (any layout `depthnormals.datasets.open` reads)")
+    parser.add_argument("--methods", "-m", required=True,
+                        help="comma-separated names from `depthnormals methods`, options in "
+                             "brackets: 3f2n,d2nt,\"3f2n[aggregate=mean]\"")
+    parser.add_argument("--out", "-o", type=Path, required=True, help="output folder")
+    parser.add_argument("--errors", choices=("folded", "signed"), default="folded",
+                        help="fold errors above 90 deg (3F2N protocol, default) or not")
+    parser.add_argument("--border", type=int, default=1,
+                        help="border width in pixels left out of the score (default 1)")
+    parser.add_argument("--invalid", choices=("drop", "score90"), default="drop",
+                        help="NaN estimates: dropped, coverage reported (default), or scored "
+                             "as 90 deg")
+    parser.add_argument("--edge-radius", type=int, default=2,
+                        help="'near a discontinuity' radius in pixels (default 2)")
+    parser.add_argument("--edge-angle", type=float, default=10.0,
+                        help="ground-truth crease threshold in degrees (default 10)")
+    parser.add_argument("--depth-jump", type=float, default=0.05,
+                        help="relative depth jump that makes an occlusion edge (default 0.05)")
+    parser.add_argument("--option", action="append", default=[], metavar="METHOD:KEY=VALUE",
+                        help="option for one method (label or name), e.g. 3f2n:kernel=sobel "
+                             "(repeatable; JSON values)")
+    parser.add_argument("--frames", type=int, default=None,
+                        help="evaluate only the first N frames")
+    parser.add_argument("--figures", type=int, default=3,
+                        help="Fig. 3 layouts for the first frame of up to N groups (default 3; "
+                             "0: no figures)")
+    parser.add_argument("--figure-method", default=None,
+                        help="method whose estimate is panel (iii) (default: the last)")
+    parser.add_argument("--error-vmax", type=float, default=20.0,
+                        help="top of the error colour scale in degrees (default 20)")
+    parser.add_argument("--threads", type=int, default=None,
+                        help="numba threads (default: all cores)")
+    parser.add_argument("--no-resume", action="store_true",
+                        help="recompute every (frame, method) even if an earlier run finished it")
+    parser.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+
+
+def parse_method_options(items: list[str]) -> dict[str, dict]:
+    """``["3f2n:kernel=sobel"]`` -> ``{"3f2n": {"kernel": "sobel"}}`` (JSON values)."""
+    from .estimate import parse_options
+
+    out: dict[str, dict] = {}
+    for item in items:
+        if ":" not in item.split("=", 1)[0]:
+            raise ValueError(f"--option {item!r} must look like METHOD:KEY=VALUE")
+        method, rest = item.split(":", 1)
+        out.setdefault(method.strip(), {}).update(parse_options([rest]))
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..evaluate import run_evaluation, summary_markdown
+
+    res = run_evaluation(
+        args.dataset, args.methods, args.out, folded=args.errors == "folded",
+        border=args.border, invalid=args.invalid, edge_radius=args.edge_radius,
+        edge_angle=args.edge_angle, depth_jump=args.depth_jump,
+        method_options=parse_method_options(args.option), frames=args.frames,
+        figures=args.figures, figure_method=args.figure_method, error_vmax=args.error_vmax,
+        threads=args.threads, resume=not args.no_resume, progress=not args.quiet,
+    )
+    labels = [m["label"] for m in res.settings["methods"]]
+    table = summary_markdown(res.summary, labels).split("\n\n## ")[1]
+    print("## " + table.strip())
+    print(f"\n{len(res.rows)} rows ({res.computed} computed, {res.reused} reused from an "
+          f"earlier run) -> {res.out_dir / 'results.csv'}, summary.md, summary.json, "
+          f"settings.json" + (f", {len(res.figures)} figures" if res.figures else ""))
+    return 0

@@ -1,0 +1,50 @@
+"""Evaluation harness: the paper's tables and figures for any dataset this library reads.
+
+:func:`run_evaluation` runs estimators on every frame and writes ``results.csv`` (one row
+per frame and method), per-group summaries (markdown and JSON), figures and a sidecar JSON
+of its settings; an interrupted run resumes. The pieces are public too: :class:`Protocol`
+(which pixels count and how), :func:`score_frame`, :func:`discontinuity_mask`,
+:func:`summarize`.
+
+Matplotlib is imported only when figures are drawn.
+"""
+
+from __future__ import annotations
+
+from ._env import machine_description
+from ._methods import MethodSpec, parse_method_spec, resolve_methods
+from ._protocol import (
+    HIST_BIN_DEG,
+    INVALID_POLICIES,
+    FrameScore,
+    Protocol,
+    discontinuity_mask,
+    score_frame,
+    scoring_mask,
+)
+from ._run import EvaluationResult, run_evaluation
+from ._store import FIELDS, read_results_csv
+from ._summary import ALL_GROUPS, pooled_median, summarize, summary_markdown, threshold_curve
+
+__all__ = [
+    "ALL_GROUPS",
+    "FIELDS",
+    "HIST_BIN_DEG",
+    "INVALID_POLICIES",
+    "EvaluationResult",
+    "FrameScore",
+    "MethodSpec",
+    "Protocol",
+    "discontinuity_mask",
+    "machine_description",
+    "parse_method_spec",
+    "pooled_median",
+    "read_results_csv",
+    "resolve_methods",
+    "run_evaluation",
+    "score_frame",
+    "scoring_mask",
+    "summarize",
+    "summary_markdown",
+    "threshold_curve",
+]
