@@ -29,6 +29,8 @@ __all__ = [
     "Scene",
     "Sphere",
     "box_on_floor",
+    "demo_room",
+    "make_scene",
     "planar_interior",
     "scene_names",
     "sphere_before_wall",
@@ -225,11 +227,24 @@ def sphere_before_wall() -> Scene:
     ], "sphere-before-wall")
 
 
+def demo_room() -> Scene:
+    """Floor, two walls, a rotated box and a sphere: the scene of ``depthnormals demo``."""
+    return Scene([
+        Plane((0.0, -1.0, 0.0), -1.0),
+        Plane((0.0, 0.0, -1.0), -6.0),
+        Plane(tuple(_unit((1.0, 0.0, -0.35))), 0.25),
+        Box((0.45, 0.6, 3.6), (0.55, 0.4, 0.45), (0.0, 30.0, 0.0)),
+        Box((-0.55, 0.85, 2.8), (0.25, 0.15, 0.25), (0.0, -20.0, 0.0)),
+        Sphere((-0.35, 0.1, 4.2), 0.55),
+    ], "demo-room")
+
+
 _SCENES = {
     "tilted-plane": tilted_plane,
     "box-on-floor": box_on_floor,
     "stairs": stairs,
     "sphere-before-wall": sphere_before_wall,
+    "demo-room": demo_room,
 }
 
 

@@ -67,8 +67,8 @@ def _cx(a, b):
 
 
 @nb.njit(cache=True, inline="always")
-def median8(a0, a1, a2, a3, a4, a5, a6, a7):
-    """Median of 8 values (mean of the 4th and 5th) by a branch-free sorting network."""
+def median8_pair(a0, a1, a2, a3, a4, a5, a6, a7):
+    """The 4th and 5th smallest of 8 values, by a branch-free sorting network."""
     a0, a2 = _cx(a0, a2)
     a1, a3 = _cx(a1, a3)
     a4, a6 = _cx(a4, a6)
@@ -86,7 +86,7 @@ def median8(a0, a1, a2, a3, a4, a5, a6, a7):
     a1, a4 = _cx(a1, a4)
     a3, a6 = _cx(a3, a6)
     a3, a4 = _cx(a3, a4)
-    return 0.5 * (a3 + a4)
+    return a3, a4
 
 
 @nb.njit(cache=True, inline="always")
@@ -136,13 +136,26 @@ def _generic_pixel(z, D, v, u, fx, fy, cx, cy, deriv, smooth, roberts, mode, nb_
 _FASTMATH = {"nsz", "contract", "arcp"}
 
 
+@nb.njit(cache=True, inline="always")
+def _slot(t, d, z, parity):
+    """A candidate, or +-inf (alternating) when it is dropped (dz = 0 or invalid neighbour).
+
+    Dropped candidates placed alternately at +inf and -inf leave the middle of the sorted 8
+    where the median of the kept ones is; returns (value, kept, new parity).
+    """
+    kept = d != 0.0 and d == d and z == z
+    fill = np.inf if parity == 0 else -np.inf
+    return (t if kept else fill), (1.0 if kept else 0.0), (parity if kept else 1 - parity)
+
+
 @nb.njit(cache=True, fastmath=_FASTMATH)
 def _fd_row(zp, zc, zn, v, fx, fy, cx, cy, mode, bx, by, bz, flag):
     """Branch-free (vectorisable) FD 3F2N over the interior of one row.
 
     ``nz_i = -(gu a + gv b) - (gu du_i + gv dv_i) z_i / (z_i - z_q)`` with a = u - cx,
-    b = v - cy: the 3F2N candidate rewritten without X and Y. ``flag[u]`` is set where any
-    neighbour is invalid or ties in depth (those pixels take the general path).
+    b = v - cy: the 3F2N candidate rewritten without X and Y. Candidates with dz = 0 or an
+    invalid neighbour are dropped; ``flag[u]`` is set where the centre or a 4-neighbour is
+    invalid (those pixels take the general path).
     """
     w = zc.size
     b = v - cy
@@ -166,31 +179,42 @@ def _fd_row(zp, zc, zn, v, fx, fy, cx, cy, mode, bx, by, bz, flag):
         d5 = z5 - zq
         d6 = z6 - zq
         d7 = z7 - zq
-        t0 = (-gu - gv) * z0 / d0
-        t1 = -gv * z1 / d1
-        t2 = (gu - gv) * z2 / d2
-        t3 = -gu * z3 / d3
-        t4 = gu * z4 / d4
-        t5 = (gv - gu) * z5 / d5
-        t6 = gv * z6 / d6
-        t7 = (gu + gv) * z7 / d7
+        p = 0
+        t0, k0, p = _slot((-gu - gv) * z0 / d0, d0, z0, p)
+        t1, k1, p = _slot(-gv * z1 / d1, d1, z1, p)
+        t2, k2, p = _slot((gu - gv) * z2 / d2, d2, z2, p)
+        t3, k3, p = _slot(-gu * z3 / d3, d3, z3, p)
+        t4, k4, p = _slot(gu * z4 / d4, d4, z4, p)
+        t5, k5, p = _slot((gv - gu) * z5 / d5, d5, z5, p)
+        t6, k6, p = _slot(gv * z6 / d6, d6, z6, p)
+        t7, k7, p = _slot((gu + gv) * z7 / d7, d7, z7, p)
+        n = k0 + k1 + k2 + k3 + k4 + k5 + k6 + k7
         if mode == 0:
-            m = median8(t0, t1, t2, t3, t4, t5, t6, t7)
+            lo, hi = median8_pair(t0, t1, t2, t3, t4, t5, t6, t7)
+            m = 0.5 * (lo + hi) if p == 0 else lo
         else:
-            m = 0.125 * (t0 + t1 + t2 + t3 + t4 + t5 + t6 + t7)
+            s = (k0 * t0 if k0 > 0.0 else 0.0) + (k1 * t1 if k1 > 0.0 else 0.0) \
+                + (k2 * t2 if k2 > 0.0 else 0.0) + (k3 * t3 if k3 > 0.0 else 0.0) \
+                + (k4 * t4 if k4 > 0.0 else 0.0) + (k5 * t5 if k5 > 0.0 else 0.0) \
+                + (k6 * t6 if k6 > 0.0 else 0.0) + (k7 * t7 if k7 > 0.0 else 0.0)
+            m = s / n
         a = u - cx
         nx = fx * gu
         ny = fy * gv
         nz = -(gu * a + gv * b) - m
+        # no candidate left (a flat fronto-parallel patch): (0, 0, -1) as the reference
+        nx = nx if n > 0.0 else 0.0
+        ny = ny if n > 0.0 else 0.0
+        nz = nz if n > 0.0 else -1.0
         nrm = math.sqrt(nx * nx + ny * ny + nz * nz)
         inv = 1.0 / nrm
-        dot = gu * a + gv * b + nz  # dot(n, X) / z
+        dot = gu * a + gv * b + nz if n > 0.0 else -1.0  # dot(n, X) / z
         inv = -inv if dot > 0.0 else inv
         bx[u] = nx * inv
         by[u] = ny * inv
         bz[u] = nz * inv
-        prod = d0 * d1 * d2 * d3 * d4 * d5 * d6 * d7 * nrm * zq
-        flag[u] = not (prod == prod and prod != 0.0 and abs(prod) < np.inf)
+        chk = nrm * zq * gu * 0.0 + nrm * zq * gv * 0.0 + nrm
+        flag[u] = not (chk == chk and nrm > 0.0 and nrm < np.inf and zq == zq)
 
 
 @nb.njit(cache=True, parallel=True)
@@ -218,28 +242,6 @@ def _threefn_kernel(z, fx, fy, cx, cy, deriv, smooth, roberts, mode, fast_fd, nb
                 out[v, u, 1] = np.nan
                 out[v, u, 2] = np.nan
                 continue
-            if fast_fd and 0 < v < h - 1 and 0 < u < w - 1:
-                # FD interior with ties in depth: candidates with dz = 0 dropped
-                gu = 0.5 * (D[v, u + 1] - D[v, u - 1])
-                gv = 0.5 * (D[v + 1, u] - D[v - 1, u])
-                if gu == gu and gv == gv:
-                    n = 0
-                    for k in range(8):
-                        dv = nb_off[k, 0]
-                        du = nb_off[k, 1]
-                        zk = z[v + dv, u + du]
-                        dz = zk - zq
-                        if dz != 0.0 and dz == dz:
-                            cand[n] = (gu * du + gv * dv) * zk / dz
-                            n += 1
-                    a = u - cx
-                    b = v - cy
-                    if n == 0:
-                        store_normal(out, v, u, 0.0, 0.0, -1.0, a, b, fx)
-                    else:
-                        nz = -(gu * a + gv * b) - central_tendency(cand, n, mode)
-                        store_normal(out, v, u, fx * gu, fy * gv, nz, a * zq / fx, b * zq / fy, zq)
-                    continue
             _generic_pixel(z, D, v, u, fx, fy, cx, cy, deriv, smooth, roberts, mode, nb_off,
                            cand, out)
 
