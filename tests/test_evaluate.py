@@ -390,3 +390,12 @@ def test_import_stays_light():
             "bad = [m for m in ('matplotlib', 'cv2', 'torch') if m in sys.modules]; "
             "assert not bad, bad")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_group_levels_pool_groups(tiny_3f2n, tmp_path):
+    res = run_evaluation(tiny_3f2n, "d2nt", tmp_path, figures=0, group_levels=[0])
+    assert list(res.summary["groups"]) == ["Easy"]
+    s = res.summary["groups"]["Easy"]["d2nt"]
+    assert s["frames"] == 3
+    assert s["e_A"] == pytest.approx(np.mean([r["mean_deg"] for r in res.rows]), rel=1e-12)
+    assert [r["group"] for r in res.rows] == ["Easy/box", "Easy/box", "Easy/sphere"]

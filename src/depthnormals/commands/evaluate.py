@@ -34,6 +34,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(repeatable; JSON values)")
     parser.add_argument("--frames", type=int, default=None,
                         help="evaluate only the first N frames")
+    parser.add_argument("--group-levels", default=None, metavar="I,J,...",
+                        help="summarise by these '/'-separated components of the group names "
+                             "(0-based), e.g. 0,2: indoor/room-03/clean -> indoor/clean")
     parser.add_argument("--figures", type=int, default=3,
                         help="Fig. 3 layouts for the first frame of up to N groups (default 3; "
                              "0: no figures)")
@@ -61,6 +64,15 @@ def parse_method_options(items: list[str]) -> dict[str, dict]:
     return out
 
 
+def _levels(text: str | None) -> list[int] | None:
+    if text is None:
+        return None
+    try:
+        return [int(x) for x in text.split(",") if x.strip()]
+    except ValueError as exc:
+        raise ValueError(f"--group-levels {text!r} must be comma-separated integers") from exc
+
+
 def run(args: argparse.Namespace) -> int:
     from ..evaluate import run_evaluation, summary_markdown
 
@@ -69,6 +81,7 @@ def run(args: argparse.Namespace) -> int:
         border=args.border, invalid=args.invalid, edge_radius=args.edge_radius,
         edge_angle=args.edge_angle, depth_jump=args.depth_jump,
         method_options=parse_method_options(args.option), frames=args.frames,
+        group_levels=_levels(args.group_levels),
         figures=args.figures, figure_method=args.figure_method, error_vmax=args.error_vmax,
         threads=args.threads, resume=not args.no_resume, progress=not args.quiet,
     )

@@ -24,7 +24,14 @@ from ._protocol import (
 )
 from ._run import EvaluationResult, run_evaluation
 from ._store import FIELDS, read_results_csv
-from ._summary import ALL_GROUPS, pooled_median, summarize, summary_markdown, threshold_curve
+from ._summary import (
+    ALL_GROUPS,
+    group_levels_key,
+    pooled_median,
+    summarize,
+    summary_markdown,
+    threshold_curve,
+)
 
 __all__ = [
     "ALL_GROUPS",
@@ -36,6 +43,7 @@ __all__ = [
     "MethodSpec",
     "Protocol",
     "discontinuity_mask",
+    "group_levels_key",
     "machine_description",
     "parse_method_spec",
     "pooled_median",

@@ -18,7 +18,7 @@ from ._env import machine_description
 from ._methods import MethodSpec, resolve_methods
 from ._protocol import HIST_BIN_DEG, Protocol, discontinuity_mask, score_frame, scoring_mask
 from ._store import PartStore, write_json, write_results_csv, write_text
-from ._summary import ALL_GROUPS, summarize, summary_markdown
+from ._summary import ALL_GROUPS, group_levels_key, summarize, summary_markdown
 
 __all__ = ["EvaluationResult", "run_evaluation"]
 
@@ -134,6 +134,7 @@ def run_evaluation(
     depth_jump: float = 0.05,
     method_options: Mapping[str, Mapping[str, Any]] | None = None,
     frames: int | None = None,
+    group_levels: Sequence[int] | None = None,
     figures: int = 3,
     figure_method: str | None = None,
     error_vmax: float = 20.0,
@@ -181,6 +182,10 @@ def run_evaluation(
         ``{method name or label: {option: value}}``, passed to the estimators.
     frames : int, optional
         Evaluate only the first ``frames`` frames.
+    group_levels : sequence of int, optional
+        Summarise by these "/"-separated components of the frame groups (0-based), e.g.
+        ``(0, 2)`` turns ``"indoor/room-03/clean"`` into ``"indoor/clean"`` (the paper's
+        Table III columns); ``results.csv`` keeps the full group.
     figures : int, default 3
         Fig. 3 layouts for the first frame of the first ``figures`` groups (0: no figures
         at all). Figures need matplotlib (``pip install 'depthnormals[plot]'``).
@@ -225,6 +230,7 @@ def run_evaluation(
         raise ValueError(f"frames must be a positive integer or None; got {frames!r}")
     if isinstance(figures, bool) or not isinstance(figures, int) or figures < 0:
         raise ValueError(f"figures must be an integer >= 0; got {figures!r}")
+    group_key = None if group_levels is None else group_levels_key(group_levels)
     fig_label = labels[-1] if figure_method is None else figure_method
     if fig_label not in labels:
         raise ValueError(f"figure_method {figure_method!r} is not among the methods {labels}")
@@ -252,7 +258,8 @@ def run_evaluation(
         "version": __version__,
         "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "completed": False,
-        "dataset": {"id": dataset_id, "frames_limit": frames},
+        "dataset": {"id": dataset_id, "frames_limit": frames,
+                    "group_levels": None if group_levels is None else list(group_levels)},
         "methods": [s.as_dict() for s in specs],
         "protocol": {**protocol.as_dict(), "pixels": "ground truth valid and inside the "
                      "dataset mask, minus the border",
@@ -352,7 +359,7 @@ def run_evaluation(
     if not rows:
         raise ValueError(f"the dataset {dataset_id} yielded no frames")
 
-    summary = summarize(rows, hists, labels)
+    summary = summarize(rows, hists, labels, group_key=group_key)
     summary = {"settings": {k: settings[k] for k in ("version", "dataset", "methods",
                                                      "protocol")}, **summary}
     write_json(out / "summary.json", summary)

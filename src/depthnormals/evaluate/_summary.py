@@ -3,17 +3,37 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
 from ._protocol import HIST_BIN_DEG
 
-__all__ = ["ALL_GROUPS", "pooled_median", "summarize", "summary_markdown", "threshold_curve"]
+__all__ = ["ALL_GROUPS", "group_levels_key", "pooled_median", "summarize", "summary_markdown",
+           "threshold_curve"]
 
 #: Name of the pseudo-group pooling every frame (present when there are several groups).
 ALL_GROUPS = "(all)"
+
+
+def group_levels_key(levels: Sequence[int]) -> Callable[[str], str]:
+    """A ``group_key`` keeping the given "/"-separated components of a group name.
+
+    Examples
+    --------
+    >>> group_levels_key([0, 2])("indoor/room-03/clean")
+    'indoor/clean'
+    """
+    levels = [int(i) for i in levels]
+    if not levels:
+        raise ValueError("group levels must name at least one component (0-based)")
+
+    def key(group: str) -> str:
+        parts = group.split("/")
+        return "/".join(parts[i] for i in levels if -len(parts) <= i < len(parts)) or group
+
+    return key
 
 
 def pooled_median(hist: np.ndarray) -> float:
@@ -75,8 +95,8 @@ def _aggregate(rows: list[dict[str, Any]], hist: np.ndarray) -> dict[str, Any]:
 
 
 def summarize(rows: Sequence[dict[str, Any]], hists: Sequence[np.ndarray],
-              labels: Sequence[str], *, curve_max: float = 90.0,
-              curve_step: float = 0.25) -> dict[str, Any]:
+              labels: Sequence[str], *, group_key: Callable[[str], str] | None = None,
+              curve_max: float = 90.0, curve_step: float = 0.25) -> dict[str, Any]:
     """Aggregate per-(frame, method) rows into per-(group, method) summaries.
 
     Parameters
@@ -87,6 +107,9 @@ def summarize(rows: Sequence[dict[str, Any]], hists: Sequence[np.ndarray],
         The error histogram of each row.
     labels : sequence of str
         Method labels, in the order to report them.
+    group_key : callable, optional
+        Maps a row's group to the group it is summarised under (default: itself), e.g.
+        ``"indoor/room-03/clean" -> "indoor/clean"``.
     curve_max, curve_step : float
         Grid (degrees) of the error-vs-threshold curves.
 
@@ -98,10 +121,12 @@ def summarize(rows: Sequence[dict[str, Any]], hists: Sequence[np.ndarray],
         scored error left out), the other metrics pool every scored pixel of the group. When
         there are several groups, ``"(all)"`` pools them all.
     """
+    key = group_key if group_key is not None else (lambda g: g)
+    row_groups = [key(r["group"]) for r in rows]
     groups: list[str] = []
-    for r in rows:
-        if r["group"] not in groups:
-            groups.append(r["group"])
+    for g in row_groups:
+        if g not in groups:
+            groups.append(g)
     if len(groups) > 1:
         groups.append(ALL_GROUPS)
     thresholds = np.round(np.arange(0.0, curve_max + curve_step / 2, curve_step), 6)
@@ -111,7 +136,7 @@ def summarize(rows: Sequence[dict[str, Any]], hists: Sequence[np.ndarray],
         out["curves"][g] = {}
         for label in labels:
             idx = [i for i, r in enumerate(rows)
-                   if r["method"] == label and (g == ALL_GROUPS or r["group"] == g)]
+                   if r["method"] == label and (g == ALL_GROUPS or row_groups[i] == g)]
             if not idx:
                 continue
             hist = np.sum([hists[i] for i in idx], axis=0)
