@@ -32,7 +32,7 @@ def _save(fig: Any, path: Path, dpi: int) -> None:
 def plot_fig3(path: str | Path, depth: np.ndarray, truth: np.ndarray, mask: np.ndarray,
               estimate: np.ndarray, estimate_label: str,
               errors: Mapping[str, np.ndarray], *, title: str = "", vmax: float = 20.0,
-              dpi: int = 110) -> None:
+              crop: bool = True, dpi: int = 110) -> None:
     """One row in the paper's Fig. 3 layout, written as PNG atomically.
 
     Panels: (i) depth, (ii) ground-truth normals, (iii) the estimate of ``estimate_label``,
@@ -53,10 +53,20 @@ def plot_fig3(path: str | Path, depth: np.ndarray, truth: np.ndarray, mask: np.n
     title : str
     vmax : float
         Top of the error colour scale (degrees).
+    crop : bool, default True
+        Crop every panel to the bounding box of ``mask`` (plus a 6 % margin).
     dpi : int
     """
     require_matplotlib()
     from matplotlib.figure import Figure
+
+    if crop and np.any(mask):
+        rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+        pad = max(2, round(0.06 * max(mask.shape)))
+        win = (slice(max(rows[0] - pad, 0), rows[-1] + pad + 1),
+               slice(max(cols[0] - pad, 0), cols[-1] + pad + 1))
+        depth, truth, mask, estimate = depth[win], truth[win], mask[win], estimate[win]
+        errors = {k: v[win] for k, v in errors.items()}
 
     n = 3 + len(errors)
     h, w = depth.shape
