@@ -1,0 +1,74 @@
+"""Closed-form eigen-solver for 3x3 symmetric matrices (numba, no LAPACK per pixel)."""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+
+__all__ = ["smallest_eigenvector"]
+
+_TWO_PI_3 = 2.0 * math.pi / 3.0
+
+
+@nb.njit(cache=True, inline="always")
+def smallest_eigenvector(a00, a01, a02, a11, a12, a22):
+    """Unit eigenvector of the smallest eigenvalue of the symmetric matrix [[a00 a01 a02] ...].
+
+    The eigenvalue comes from the trigonometric solution of the characteristic cubic; the
+    vector is the longest cross product of two rows of ``A - lambda I``. Returns NaNs when
+    the smallest eigenvalue is not simple (fewer than three non-collinear points).
+    """
+    m = max(abs(a00), abs(a01), abs(a02), abs(a11), abs(a12), abs(a22))
+    if not (m > 0.0) or not math.isfinite(m):
+        return math.nan, math.nan, math.nan
+    a00 /= m
+    a01 /= m
+    a02 /= m
+    a11 /= m
+    a12 /= m
+    a22 /= m
+    q = (a00 + a11 + a22) / 3.0
+    b00 = a00 - q
+    b11 = a11 - q
+    b22 = a22 - q
+    p2 = (b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / 6.0
+    if not (p2 > 0.0):
+        return math.nan, math.nan, math.nan
+    p = math.sqrt(p2)
+    det = (b00 * (b11 * b22 - a12 * a12) - a01 * (a01 * b22 - a12 * a02)
+           + a02 * (a01 * a12 - b11 * a02))
+    r = det / (2.0 * p2 * p)
+    if r < -1.0:
+        r = -1.0
+    elif r > 1.0:
+        r = 1.0
+    phi = math.acos(r) / 3.0
+    lam = q + 2.0 * p * math.cos(phi + _TWO_PI_3)
+    r00 = a00 - lam
+    r11 = a11 - lam
+    r22 = a22 - lam
+    # rows: (r00, a01, a02), (a01, r11, a12), (a02, a12, r22)
+    c0x = a01 * a12 - a02 * r11
+    c0y = a02 * a01 - r00 * a12
+    c0z = r00 * r11 - a01 * a01
+    c1x = a01 * r22 - a02 * a12
+    c1y = a02 * a02 - r00 * r22
+    c1z = r00 * a12 - a01 * a02
+    c2x = r11 * r22 - a12 * a12
+    c2y = a12 * a02 - a01 * r22
+    c2z = a01 * a12 - r11 * a02
+    d0 = c0x * c0x + c0y * c0y + c0z * c0z
+    d1 = c1x * c1x + c1y * c1y + c1z * c1z
+    d2 = c2x * c2x + c2y * c2y + c2z * c2z
+    if d0 >= d1 and d0 >= d2:
+        x, y, z, d = c0x, c0y, c0z, d0
+    elif d1 >= d2:
+        x, y, z, d = c1x, c1y, c1z, d1
+    else:
+        x, y, z, d = c2x, c2y, c2z, d2
+    # relative to the matrix scale (1 after division by m): rank <= 1 leaves d ~ rounding
+    if not (d > 1e-24):
+        return math.nan, math.nan, math.nan
+    s = 1.0 / math.sqrt(d)
+    return x * s, y * s, z * s
