@@ -1,6 +1,23 @@
 """The estimators. Importing this package registers every one of them."""
 
 from .d2nt import d2nt
+from .pointcloud import angle_weighted, area_weighted, plane_pca, plane_svd, vector_svd
+from .range_image import fals, line_mod, sri
+from .roadseg import sne_roadseg
+from .sda_sne import sda_sne
 from .threefn import three_filters_to_normal
 
-__all__ = ["d2nt", "three_filters_to_normal"]
+__all__ = [
+    "angle_weighted",
+    "area_weighted",
+    "d2nt",
+    "fals",
+    "line_mod",
+    "plane_pca",
+    "plane_svd",
+    "sda_sne",
+    "sne_roadseg",
+    "sri",
+    "three_filters_to_normal",
+    "vector_svd",
+]
