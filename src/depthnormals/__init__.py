@@ -15,7 +15,20 @@ from __future__ import annotations
 
 from . import datasets, io
 from .camera import Intrinsics, as_intrinsics, backproject
-from .estimators import d2nt, three_filters_to_normal
+from .estimators import (
+    angle_weighted,
+    area_weighted,
+    d2nt,
+    fals,
+    line_mod,
+    plane_pca,
+    plane_svd,
+    sda_sne,
+    sne_roadseg,
+    sri,
+    three_filters_to_normal,
+    vector_svd,
+)
 from .metrics import NormalMetrics, angular_error, normal_metrics
 from .registry import estimate_normals, get_estimator, methods
 
@@ -25,15 +38,25 @@ __all__ = [
     "Intrinsics",
     "NormalMetrics",
     "__version__",
+    "angle_weighted",
     "angular_error",
+    "area_weighted",
     "as_intrinsics",
     "backproject",
     "d2nt",
     "datasets",
     "estimate_normals",
+    "fals",
     "get_estimator",
     "io",
+    "line_mod",
     "methods",
     "normal_metrics",
+    "plane_pca",
+    "plane_svd",
+    "sda_sne",
+    "sne_roadseg",
+    "sri",
     "three_filters_to_normal",
+    "vector_svd",
 ]
