@@ -123,7 +123,7 @@ def _generic_pixel(z, D, v, u, fx, fy, cx, cy, deriv, smooth, roberts, mode, nb_
         dy = (r - cy) * zn / fy - yq
         cand[n] = -(nx * dx + ny * dy) / dz
         n += 1
-    if n == 0:
+    if n == 0 or (nx == 0.0 and ny == 0.0):
         nx = 0.0
         ny = 0.0
         nz = -1.0
@@ -202,13 +202,15 @@ def _fd_row(zp, zc, zn, v, fx, fy, cx, cy, mode, bx, by, bz, flag):
         nx = fx * gu
         ny = fy * gv
         nz = -(gu * a + gv * b) - m
-        # no candidate left (a flat fronto-parallel patch): (0, 0, -1) as the reference
-        nx = nx if n > 0.0 else 0.0
-        ny = ny if n > 0.0 else 0.0
-        nz = nz if n > 0.0 else -1.0
+        # no candidate left (a flat fronto-parallel patch): (0, 0, -1) as the reference;
+        # a zero gradient means a fronto-parallel plane whatever the candidates say
+        has = n > 0.0 and (gu != 0.0 or gv != 0.0)
+        nx = nx if has else 0.0
+        ny = ny if has else 0.0
+        nz = nz if has else -1.0
         nrm = math.sqrt(nx * nx + ny * ny + nz * nz)
         inv = 1.0 / nrm
-        dot = gu * a + gv * b + nz if n > 0.0 else -1.0  # dot(n, X) / z
+        dot = gu * a + gv * b + nz if has else -1.0  # dot(n, X) / z
         inv = -inv if dot > 0.0 else inv
         bx[u] = nx * inv
         by[u] = ny * inv
@@ -287,7 +289,9 @@ def three_filters_to_normal(depth: Any, K: Any, *, kernel: str = "fd", kernel_si
     -----
     Conventions: OpenCV camera frame, planar depth, pixel centres on integers. As in the
     public reference, neighbours with ``dz = 0`` are dropped, and when none is left the
-    normal is ``(0, 0, -1)``. Interpretation (ours): invalid pixels never enter a stencil;
+    normal is ``(0, 0, -1)``; so is it where the inverse-depth gradient is exactly zero (the
+    reference returns NaN there when the remaining candidates come from another surface).
+    Interpretation (ours): invalid pixels never enter a stencil;
     a stencil row that would touch one falls back to a central, then one-sided difference,
     and neighbours that are invalid give no candidate. The normal is then oriented per pixel
     toward the camera, which the reference achieves with a global sign.
