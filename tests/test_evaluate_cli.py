@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import importlib.util
+import json
 
 import pytest
 
@@ -60,3 +62,29 @@ def test_main_reports_errors(tmp_path, capsys):
     rc = cli.main(["evaluate", str(tmp_path / "missing"), "-m", "3f2n", "-o", str(tmp_path)])
     assert rc == 1
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_bench_threads_peers_json(tmp_path, capsys):
+    pytest.importorskip("cv2")
+    from depthnormals.commands import bench
+
+    parser = argparse.ArgumentParser()
+    bench.add_arguments(parser)
+    out = tmp_path / "bench.json"
+    args = parser.parse_args(["--methods", "3f2n", "--sizes", "64x48,32x24", "--repeats", "3",
+                              "--warmup", "1", "--threads", "1,all", "--json", str(out),
+                              "--peers", "opencv-fals,opencv-linemod,kornia"])
+    assert bench.run(args) == 0
+    text = capsys.readouterr().out
+    assert text.count("# threads:") == len(bench._parse_threads("1,all"))
+    data = json.loads(out.read_text())
+    runs = {(r["threads"], r["method"]): r for r in data["runs"]}
+    assert (1, "3f2n") in runs and (1, "opencv-fals") in runs and (1, "opencv-linemod") in runs
+    assert runs[(1, "3f2n")]["64x48_ms"] > 0 and runs[(1, "opencv-fals")]["32x24_ms"] > 0
+    assert data["machine"]["logical_cores"] >= 1
+    if importlib.util.find_spec("kornia") is None:
+        assert "not installed" in data["peers_missing"]["kornia"]
+    with pytest.raises(ValueError, match="unknown peer"):
+        bench.run(parser.parse_args(["--peers", "pcl"]))
+    with pytest.raises(ValueError, match="--threads"):
+        bench._parse_threads("one")
