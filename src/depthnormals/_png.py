@@ -19,7 +19,7 @@ _SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _CHANNELS = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _unfilter(raw, h, stride, bpp):
     out = np.empty((h, stride), dtype=np.uint8)
     pos = 0

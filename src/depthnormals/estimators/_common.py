@@ -12,6 +12,7 @@ from typing import Any
 import numba as nb
 import numpy as np
 
+from .._parallel import run_rows
 from .._validate import check_depth
 from ..camera import Intrinsics, as_intrinsics
 
@@ -33,7 +34,7 @@ def new_output(shape: tuple[int, int]) -> np.ndarray:
     return np.full((shape[0], shape[1], 3), np.nan, dtype=np.float32)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def store_normal(out, v, u, nx, ny, nz, px, py, pz):
     """Normalise (nx, ny, nz), orient it toward the camera (dot with the point < 0), store it.
 
@@ -53,11 +54,10 @@ def store_normal(out, v, u, nx, ny, nz, px, py, pz):
     out[v, u, 2] = nz * inv
 
 
-@nb.njit(cache=True, parallel=True)
-def finish(normals, z, fx, fy, cx, cy):
-    """Renormalise and orient a float normal map in place (NaN where z is invalid)."""
-    h, w = z.shape
-    for v in nb.prange(h):
+@nb.njit(cache=True, error_model="numpy", nogil=True)
+def _finish_rows(v0, v1, normals, z, fx, fy, cx, cy):
+    w = z.shape[1]
+    for v in range(v0, v1):
         for u in range(w):
             zz = z[v, u]
             if not (zz == zz):
@@ -67,3 +67,8 @@ def finish(normals, z, fx, fy, cx, cy):
                 continue
             store_normal(normals, v, u, normals[v, u, 0], normals[v, u, 1], normals[v, u, 2],
                          (u - cx) * zz / fx, (v - cy) * zz / fy, zz)
+
+
+def finish(normals: np.ndarray, z: np.ndarray, fx: float, fy: float, cx: float, cy: float) -> None:
+    """Renormalise and orient a float normal map in place (NaN where z is invalid)."""
+    run_rows(_finish_rows, z.shape[0], normals, z, fx, fy, cx, cy)

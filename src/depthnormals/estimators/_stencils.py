@@ -62,7 +62,7 @@ def gradient_kernels(kernel: str, size: int) -> tuple[np.ndarray, np.ndarray]:
     return np.ascontiguousarray(deriv), np.ascontiguousarray(smooth)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def _at(D, r, c):
     h, w = D.shape
     if r < 0 or r >= h or c < 0 or c >= w:
@@ -70,7 +70,7 @@ def _at(D, r, c):
     return D[r, c]
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, error_model="numpy")
 def stencil_derivative(D, v, u, a_v, a_u, deriv, smooth):
     """Derivative of D at (v, u) along (a_v, a_u), smoothed across it; NaN-aware."""
     md = deriv.size // 2
@@ -115,7 +115,7 @@ def stencil_derivative(D, v, u, a_v, a_u, deriv, smooth):
     return np.nan
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, error_model="numpy")
 def roberts_gradient(D, v, u):
     """(d/du, d/dv) of D from the first fully valid 2x2 Roberts cross around (v, u).
 

@@ -8,9 +8,10 @@ from typing import Any
 import numba as nb
 import numpy as np
 
+from .._parallel import run_rows
 from .._validate import check_choice
 from ..registry import register
-from ._common import new_output, prepare, store_normal
+from ._common import prepare, store_normal
 
 __all__ = ["VARIANTS", "d2nt", "neighbour_copy_refinement"]
 
@@ -18,7 +19,7 @@ VARIANTS = ("basic", "dag", "mnr")
 _EPS = 1e-8
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def _at(z, r, c):
     h, w = z.shape
     if r < 0 or r >= h or c < 0 or c >= w:
@@ -26,7 +27,7 @@ def _at(z, r, c):
     return z[r, c]
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, error_model="numpy")
 def central_derivative(z, v, u, a_v, a_u):
     """dz along (a_v, a_u): central difference / 2, else one-sided, else NaN."""
     zc = z[v, u]
@@ -41,7 +42,7 @@ def central_derivative(z, v, u, a_v, a_u):
     return np.nan
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def _dag_weights(zbb, zb, zc, zf, zff):
     """DAG weights (backward, forward) from the 1-D Laplacians at the two neighbours.
 
@@ -76,7 +77,7 @@ def _dag_weights(zbb, zb, zc, zf, zff):
     return wb, 1.0 - wb
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, error_model="numpy")
 def dag_derivative(z, v, u, a_v, a_u):
     """Discontinuity-aware gradient (DAG) filter of D2NT along (a_v, a_u).
 
@@ -104,7 +105,7 @@ def dag_derivative(z, v, u, a_v, a_u):
     return wb * gb + wf * gf
 
 
-@nb.njit(cache=True, fastmath={"nsz", "contract", "arcp"})
+@nb.njit(cache=True, error_model="numpy", fastmath={"nsz", "contract", "arcp"})
 def _basic_row(zp, zc, zn, v, fx, fy, cx, cy, bx, by, bz, flag):
     """Branch-free (vectorisable) basic D2NT over the interior of one row."""
     w = zc.size
@@ -125,82 +126,127 @@ def _basic_row(zp, zc, zn, v, fx, fy, cx, cy, bx, by, bz, flag):
         flag[u] = not (t == t and t != 0.0 and abs(t) < np.inf)
 
 
-@nb.njit(cache=True, parallel=True)
-def _d2nt_kernel(z, fx, fy, cx, cy, dag, out):
+@nb.njit(cache=True, error_model="numpy")
+def _dag_row(z, v, fx, fy, cx, cy, out, flag):
+    """DAG D2NT over the part of row v whose 5-point crosses are all valid (others flagged)."""
+    w = z.shape[1]
+    for u in range(2, w - 2):
+        zq = np.float64(z[v, u])
+        zl2 = np.float64(z[v, u - 2])
+        zl = np.float64(z[v, u - 1])
+        zr = np.float64(z[v, u + 1])
+        zr2 = np.float64(z[v, u + 2])
+        zt2 = np.float64(z[v - 2, u])
+        zt = np.float64(z[v - 1, u])
+        zb = np.float64(z[v + 1, u])
+        zb2 = np.float64(z[v + 2, u])
+        s = zq + zl2 + zl + zr + zr2 + zt2 + zt + zb + zb2
+        if not (s == s):
+            continue
+        wb, wf = _dag_weights(zl2, zl, zq, zr, zr2)
+        zu = wb * (zq - zl) + wf * (zr - zq)
+        wb, wf = _dag_weights(zt2, zt, zq, zb, zb2)
+        zv = wb * (zq - zt) + wf * (zb - zq)
+        nx = fx * zu
+        ny = fy * zv
+        nz = -(zq + (u - cx) * zu + (v - cy) * zv)
+        store_normal(out, v, u, nx, ny, nz, (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
+        flag[u] = False
+
+
+@nb.njit(cache=True, error_model="numpy", nogil=True)
+def _d2nt_rows(v0, v1, z, fx, fy, cx, cy, dag, out):
+    for v in range(v0, v1):
+        _d2nt_row(z, v, fx, fy, cx, cy, dag, out)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _d2nt_row(z, v, fx, fy, cx, cy, dag, out):
     h, w = z.shape
-    for v in nb.prange(h):
-        flag = np.ones(w, dtype=np.bool_)
-        if not dag and 0 < v < h - 1 and w > 2:
-            bx = np.empty(w)
-            by = np.empty(w)
-            bz = np.empty(w)
-            _basic_row(z[v - 1], z[v], z[v + 1], v, fx, fy, cx, cy, bx, by, bz, flag)
-            for u in range(1, w - 1):
-                out[v, u, 0] = bx[u]
-                out[v, u, 1] = by[u]
-                out[v, u, 2] = bz[u]
-        for u in range(w):
-            if not flag[u]:
-                continue
-            zq = z[v, u]
+    flag = np.ones(w, dtype=np.bool_)
+    if dag and 1 < v < h - 2:
+        _dag_row(z, v, fx, fy, cx, cy, out, flag)
+    if not dag and 0 < v < h - 1 and w > 2:
+        bx = np.empty(w)
+        by = np.empty(w)
+        bz = np.empty(w)
+        _basic_row(z[v - 1], z[v], z[v + 1], v, fx, fy, cx, cy, bx, by, bz, flag)
+        for u in range(1, w - 1):
+            out[v, u, 0] = bx[u]
+            out[v, u, 1] = by[u]
+            out[v, u, 2] = bz[u]
+    for u in range(w):
+        if not flag[u]:
+            continue
+        zq = z[v, u]
+        out[v, u, 0] = np.nan
+        out[v, u, 1] = np.nan
+        out[v, u, 2] = np.nan
+        if not (zq == zq):
+            continue
+        if dag:
+            zu = dag_derivative(z, v, u, 0, 1)
+            zv = dag_derivative(z, v, u, 1, 0)
+        else:
+            zu = central_derivative(z, v, u, 0, 1)
+            zv = central_derivative(z, v, u, 1, 0)
+        if not (zu == zu and zv == zv):
+            continue
+        nx = fx * zu
+        ny = fy * zv
+        nz = -(zq + (u - cx) * zu + (v - cy) * zv)
+        store_normal(out, v, u, nx, ny, nz, (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _laplacian_row(z, v, lap):
+    w = z.shape[1]
+    for u in range(w):
+        s = _at(z, v, u - 1) + _at(z, v, u + 1) + _at(z, v - 1, u) + _at(z, v + 1, u) - 4.0 * z[v, u]
+        lap[v, u] = abs(s) if s == s else np.inf
+
+
+@nb.njit(cache=True, error_model="numpy", nogil=True)
+def _laplacian_rows(v0, v1, z, lap):
+    for v in range(v0, v1):
+        _laplacian_row(z, v, lap)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _copy_row(z, normals, lap, v, fx, fy, cx, cy, out):
+    # candidate order of the public code: left, right, up, down, self (first minimum wins)
+    h, w = z.shape
+    dvs = (0, 0, -1, 1, 0)
+    dus = (-1, 1, 0, 0, 0)
+    for u in range(w):
+        zq = z[v, u]
+        if not (zq == zq):
             out[v, u, 0] = np.nan
             out[v, u, 1] = np.nan
             out[v, u, 2] = np.nan
-            if not (zq == zq):
+            continue
+        best = np.inf
+        bv = v
+        bu = u
+        for k in range(5):
+            r = v + dvs[k]
+            c = u + dus[k]
+            if r < 0 or r >= h or c < 0 or c >= w:
                 continue
-            if dag:
-                zu = dag_derivative(z, v, u, 0, 1)
-                zv = dag_derivative(z, v, u, 1, 0)
-            else:
-                zu = central_derivative(z, v, u, 0, 1)
-                zv = central_derivative(z, v, u, 1, 0)
-            if not (zu == zu and zv == zv):
+            if not (normals[r, c, 0] == normals[r, c, 0]):
                 continue
-            nx = fx * zu
-            ny = fy * zv
-            nz = -(zq + (u - cx) * zu + (v - cy) * zv)
-            store_normal(out, v, u, nx, ny, nz, (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
+            if lap[r, c] < best:
+                best = lap[r, c]
+                bv = r
+                bu = c
+        store_normal(out, v, u, normals[bv, bu, 0], normals[bv, bu, 1], normals[bv, bu, 2],
+                     (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
 
 
-@nb.njit(cache=True, parallel=True)
-def _laplacian4(z):
-    h, w = z.shape
-    lap = np.full((h, w), np.inf)
-    for v in nb.prange(h):
-        for u in range(w):
-            s = _at(z, v, u - 1) + _at(z, v, u + 1) + _at(z, v - 1, u) + _at(z, v + 1, u) - 4.0 * z[v, u]
-            if s == s:
-                lap[v, u] = abs(s)
-    return lap
-
-
-@nb.njit(cache=True, parallel=True)
-def _copy_kernel(z, normals, lap, fx, fy, cx, cy, out):
-    h, w = z.shape
-    # candidate order of the public code: left, right, up, down, self (first minimum wins)
-    dvs = (0, 0, -1, 1, 0)
-    dus = (-1, 1, 0, 0, 0)
-    for v in nb.prange(h):
-        for u in range(w):
-            zq = z[v, u]
-            if not (zq == zq):
-                continue
-            best = np.inf
-            bv = np.int64(v)
-            bu = np.int64(u)
-            for k in range(5):
-                r = v + dvs[k]
-                c = u + dus[k]
-                if r < 0 or r >= h or c < 0 or c >= w:
-                    continue
-                if not (normals[r, c, 0] == normals[r, c, 0]):
-                    continue
-                if lap[r, c] < best:
-                    best = lap[r, c]
-                    bv = r
-                    bu = c
-            store_normal(out, v, u, normals[bv, bu, 0], normals[bv, bu, 1], normals[bv, bu, 2],
-                         (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
+@nb.njit(cache=True, error_model="numpy", nogil=True)
+def _copy_rows(v0, v1, z, normals, lap, fx, fy, cx, cy, out):
+    for v in range(v0, v1):
+        _copy_row(z, normals, lap, v, fx, fy, cx, cy, out)
 
 
 def neighbour_copy_refinement(normals: np.ndarray, z: np.ndarray, fx: float, fy: float,
@@ -210,8 +256,10 @@ def neighbour_copy_refinement(normals: np.ndarray, z: np.ndarray, fx: float, fy:
     Smoothness is the magnitude of the 4-neighbour Laplacian of depth (infinite where a
     neighbour is invalid). ``z`` is depth with NaN at invalid pixels.
     """
-    out = new_output(z.shape)
-    _copy_kernel(z, normals, _laplacian4(z), fx, fy, cx, cy, out)
+    out = np.empty((*z.shape, 3), dtype=np.float32)
+    lap = np.empty(z.shape)
+    run_rows(_laplacian_rows, z.shape[0], z, lap)
+    run_rows(_copy_rows, z.shape[0], z, normals, lap, fx, fy, cx, cy, out)
     return out
 
 
@@ -268,7 +316,7 @@ def d2nt(depth: Any, K: Any, *, variant: str = "mnr", depth_scale: float | None 
     check_choice(variant, "variant", VARIANTS)
     z, cam = prepare(depth, K, depth_scale)
     out = np.empty((*z.shape, 3), dtype=np.float32)
-    _d2nt_kernel(z, cam.fx, cam.fy, cam.cx, cam.cy, variant != "basic", out)
+    run_rows(_d2nt_rows, z.shape[0], z, cam.fx, cam.fy, cam.cx, cam.cy, variant != "basic", out)
     if variant == "mnr":
         out = neighbour_copy_refinement(out, z, cam.fx, cam.fy, cam.cx, cam.cy)
     return out

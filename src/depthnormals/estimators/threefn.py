@@ -8,6 +8,7 @@ from typing import Any
 import numba as nb
 import numpy as np
 
+from .._parallel import run_rows
 from .._validate import check_choice
 from ..registry import register
 from ._common import prepare, store_normal
@@ -21,7 +22,7 @@ AGGREGATES = ("median", "mean", "trimean", "trimmed-mean")
 _NB = np.array([[-1, -1], [-1, 0], [-1, 1], [0, -1], [0, 1], [1, -1], [1, 0], [1, 1]], dtype=np.int64)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def _quantile_sorted(c, n, q):
     pos = q * (n - 1)
     lo = int(pos)
@@ -30,7 +31,7 @@ def _quantile_sorted(c, n, q):
     return c[lo] * (1.0 - f) + c[hi] * f
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, error_model="numpy")
 def central_tendency(c, n, mode):
     """Central tendency of c[:n]: 0 median, 1 mean, 2 trimean, 3 trimmed mean (AGGREGATES order).
 
@@ -61,12 +62,12 @@ def central_tendency(c, n, mode):
     return s / (hi - lo)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def _cx(a, b):
     return (a if a < b else b), (b if a < b else a)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def median8_pair(a0, a1, a2, a3, a4, a5, a6, a7):
     """The 4th and 5th smallest of 8 values, by a branch-free sorting network."""
     a0, a2 = _cx(a0, a2)
@@ -89,7 +90,7 @@ def median8_pair(a0, a1, a2, a3, a4, a5, a6, a7):
     return a3, a4
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, error_model="numpy")
 def _generic_pixel(z, D, v, u, fx, fy, cx, cy, deriv, smooth, roberts, mode, nb_off, cand, out):
     h, w = z.shape
     zq = z[v, u]
@@ -136,7 +137,7 @@ def _generic_pixel(z, D, v, u, fx, fy, cx, cy, deriv, smooth, roberts, mode, nb_
 _FASTMATH = {"nsz", "contract", "arcp"}
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def _slot(t, d, z, parity):
     """A candidate, or +-inf (alternating) when it is dropped (dz = 0 or invalid neighbour).
 
@@ -148,7 +149,7 @@ def _slot(t, d, z, parity):
     return (t if kept else fill), (1.0 if kept else 0.0), (parity if kept else 1 - parity)
 
 
-@nb.njit(cache=True, fastmath=_FASTMATH)
+@nb.njit(cache=True, error_model="numpy", fastmath=_FASTMATH)
 def _fd_row(zp, zc, zn, v, fx, fy, cx, cy, mode, bx, by, bz, flag):
     """Branch-free (vectorisable) FD 3F2N over the interior of one row.
 
@@ -219,17 +220,17 @@ def _fd_row(zp, zc, zn, v, fx, fy, cx, cy, mode, bx, by, bz, flag):
         flag[u] = not (chk == chk and nrm > 0.0 and nrm < np.inf and zq == zq)
 
 
-@nb.njit(cache=True, parallel=True)
-def _threefn_kernel(z, fx, fy, cx, cy, deriv, smooth, roberts, mode, fast_fd, nb_off, out):
+@nb.njit(cache=True, error_model="numpy", nogil=True)
+def _threefn_rows(v0, v1, z, D, fx, fy, cx, cy, deriv, smooth, roberts, mode, fast_fd, nb_off, out):
     h, w = z.shape
-    D = 1.0 / z.astype(np.float64)
-    for v in nb.prange(h):
-        cand = np.empty(8)
-        flag = np.ones(w, dtype=np.bool_)
+    cand = np.empty(8)
+    flag = np.empty(w, dtype=np.bool_)
+    bx = np.empty(w)
+    by = np.empty(w)
+    bz = np.empty(w)
+    for v in range(v0, v1):
+        flag[:] = True
         if fast_fd and 0 < v < h - 1 and w > 2:
-            bx = np.empty(w)
-            by = np.empty(w)
-            bz = np.empty(w)
             _fd_row(z[v - 1], z[v], z[v + 1], v, fx, fy, cx, cy, mode, bx, by, bz, flag)
             for u in range(1, w - 1):
                 out[v, u, 0] = bx[u]
@@ -238,14 +239,12 @@ def _threefn_kernel(z, fx, fy, cx, cy, deriv, smooth, roberts, mode, fast_fd, nb
         for u in range(w):
             if not flag[u]:
                 continue
-            zq = z[v, u]
-            if not (zq == zq):
+            if not (z[v, u] == z[v, u]):
                 out[v, u, 0] = np.nan
                 out[v, u, 1] = np.nan
                 out[v, u, 2] = np.nan
                 continue
-            _generic_pixel(z, D, v, u, fx, fy, cx, cy, deriv, smooth, roberts, mode, nb_off,
-                           cand, out)
+            _generic_pixel(z, D, v, u, fx, fy, cx, cy, deriv, smooth, roberts, mode, nb_off, cand, out)
 
 
 @register("3f2n")
@@ -321,6 +320,7 @@ def three_filters_to_normal(depth: Any, K: Any, *, kernel: str = "fd", kernel_si
         deriv, smooth = gradient_kernels(kernel, kernel_size)
     out = np.empty((*z.shape, 3), dtype=np.float32)
     fast_fd = kernel == "fd" and kernel_size == 3 and mode in (0, 1)
-    _threefn_kernel(z, cam.fx, cam.fy, cam.cx, cam.cy, deriv, smooth, kernel == "roberts",
-                    mode, fast_fd, _NB, out)
+    D = np.divide(1.0, z, dtype=np.float64)
+    run_rows(_threefn_rows, z.shape[0], z, D, cam.fx, cam.fy, cam.cx, cam.cy, deriv, smooth,
+             kernel == "roberts", mode, fast_fd, _NB, out)
     return out
