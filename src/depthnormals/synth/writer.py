@@ -1,0 +1,372 @@
+"""Generating a synthetic benchmark on disk, resumably, and exporting it to the 3F2N format.
+
+On-disk format (``format = "depthnormals-synth"``, version 1; see docs/synthetic.md)::
+
+    OUT/dataset.json                      every setting, the library version, the scene list
+    OUT/<kind>/<scene>/scene.json         intrinsics, image size, camera poses, recipe, seed
+    OUT/<kind>/<scene>/normals/0000.npy   float32 (H, W, 3) ground truth, NaN = no surface
+    OUT/<kind>/<scene>/valid/0000.npy     bool (H, W): ground truth valid (a surface is seen)
+    OUT/<kind>/<scene>/clean/0000.npy     float32 (H, W) planar depth, metres, 0 = invalid
+    OUT/<kind>/<scene>/<model>/0000.npy   float32 (H, W) noisy depth of each noise model
+
+``<kind>`` is ``indoor``, ``outdoor`` or ``mesh``. Every file is written atomically, so a file
+that exists is complete; an interrupted run resumes by skipping the views whose files all
+exist. A run into a folder made with other settings is refused (nothing is overwritten).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..camera import as_intrinsics
+from ..io import atomic_write, write_bytes_atomic, write_png
+from ..render import KINECT_V2, KINECT_V2_SIZE, render_mesh, render_subsamples
+from . import noise as _noise
+from .poses import PoseConstraints, sample_poses
+from .scenes import Scene, load_mesh_scene, make_scene, scene_names
+
+__all__ = ["FORMAT", "FORMAT_VERSION", "SynthSummary", "export_3f2n", "generate"]
+
+FORMAT = "depthnormals-synth"
+FORMAT_VERSION = 1
+_KIND_ID = {"indoor": 0, "outdoor": 1, "mesh": 2}
+
+
+@dataclass(frozen=True)
+class SynthSummary:
+    """What :func:`generate` did (timings are not written to disk: files stay deterministic)."""
+
+    root: Path
+    frames: int
+    written: int
+    skipped: int
+    seconds: float
+    render_seconds: float
+
+    @property
+    def render_ms_per_frame(self) -> float:
+        """Mean time of the clean 1x render per written frame, milliseconds."""
+        return 1e3 * self.render_seconds / max(self.written, 1)
+
+
+def _rng(seed: int, *keys: int) -> np.random.Generator:
+    return np.random.default_rng(np.random.SeedSequence([int(seed), *map(int, keys)]))
+
+
+def _save_npy(path: Path, arr: np.ndarray) -> None:
+    with atomic_write(path) as fh:
+        np.save(fh, arr, allow_pickle=False)
+
+
+def _write_json(path: Path, data: dict) -> None:
+    write_bytes_atomic(path, (json.dumps(data, indent=1, sort_keys=True) + "\n").encode())
+
+
+def _count(name: str, value: Any, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}; got {value!r}")
+    return int(value)
+
+
+class _Progress:
+    def __init__(self, total: int, enabled: bool) -> None:
+        self.total, self.done, self.bar = total, 0, None
+        self.enabled = enabled
+        if enabled:
+            try:
+                from tqdm import tqdm
+            except ImportError:
+                tqdm = None
+            if tqdm is not None:
+                self.bar = tqdm(total=total, desc="synth", unit="view", file=sys.stderr)
+
+    def update(self) -> None:
+        self.done += 1
+        if self.bar is not None:
+            self.bar.update(1)
+        elif self.enabled:
+            print(f"\rsynth: {self.done}/{self.total} views", end="", file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+        elif self.enabled:
+            print(file=sys.stderr)
+
+
+def generate(out: str | Path, *, indoor: int = 10, outdoor: int = 10, views: int = 25, seed: int = 0,
+             noise: Sequence[str] = ("kinect_v2",), meshes: Sequence[str | Path] = (),
+             K: Any = KINECT_V2, size: tuple[int, int] = KINECT_V2_SIZE, near: float = 0.05,
+             constraints: PoseConstraints | None = None, progress: bool = True) -> SynthSummary:
+    """Render a synthetic benchmark into ``out`` (clean frames plus one variant per noise model).
+
+    Scene ``i`` of a kind uses recipe ``i mod 10`` of that kind (:func:`scene_names`) with its
+    own seed; every random choice (scene, poses, noise of each view and model) draws from a
+    generator seeded by ``(seed, kind, scene, purpose, view)``, so the output is byte-identical
+    for the same arguments, and the same scene is the same whatever the other counts.
+
+    Parameters
+    ----------
+    out : str or Path
+        Output folder (created; may exist from an interrupted run with the same settings).
+    indoor, outdoor : int, keyword-only
+        Numbers of procedural indoor and outdoor scenes (>= 0).
+    views : int, keyword-only
+        Views per scene (>= 1).
+    seed : int, keyword-only
+        Master seed (>= 0).
+    noise : sequence of str, keyword-only
+        Noise model specs (:func:`depthnormals.synth.noise.parse_noise_spec`), e.g.
+        ``("kinect_v2", "gaussian:sigma_px=0.1")``; one variant folder per model name.
+    meshes : sequence of paths, keyword-only
+        User mesh files (OBJ, PLY, STL, GLB; via trimesh), one scene each, kind ``mesh``.
+    K : intrinsics, keyword-only
+        Camera; default Kinect v2.
+    size : (H, W), keyword-only
+        Image size; default 424 x 512.
+    near : float, keyword-only
+        Near clipping distance, metres.
+    constraints : PoseConstraints, optional, keyword-only
+        Camera acceptance rules (default ``PoseConstraints()``).
+    progress : bool, keyword-only
+        Show a progress bar on stderr (tqdm if installed, else a counter).
+
+    Returns
+    -------
+    SynthSummary
+
+    Raises
+    ------
+    ValueError
+        Bad settings, an empty or corrupt mesh, a scene where no camera pose can be found,
+        or an ``out`` folder that holds a dataset made with other settings.
+    FileNotFoundError
+        A mesh file is missing.
+    OSError
+        ``out`` cannot be created or written.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     s = generate(tmp, indoor=1, outdoor=0, views=1, size=(48, 64),
+    ...                  K=(36.5, 36.5, 31.5, 23.5), progress=False)
+    ...     sorted(p.name for p in (s.root / "indoor" / "living_room-00").iterdir())
+    ['clean', 'kinect_v2', 'normals', 'scene.json', 'valid']
+    """
+    t_start = time.perf_counter()
+    constraints = PoseConstraints() if constraints is None else constraints
+    indoor = _count("indoor", indoor, 0)
+    outdoor = _count("outdoor", outdoor, 0)
+    views = _count("views", views, 1)
+    seed = _count("seed", seed, 0)
+    cam = as_intrinsics(K)
+    if (not isinstance(size, (tuple, list)) or len(size) != 2
+            or not all(isinstance(s, (int, np.integer)) and s >= 4 for s in size)):
+        raise ValueError(f"size must be (H, W), integers >= 4; got {size!r}")
+    h, w = int(size[0]), int(size[1])
+    if isinstance(noise, str):
+        noise = [noise]
+    models: dict[str, dict] = {}
+    for spec in noise:
+        name, settings = _noise.parse_noise_spec(spec)
+        if name in models:
+            raise ValueError(f"noise model {name!r} is given twice; give each model once")
+        models[name] = settings
+    # load user meshes before anything is written: a bad file fails early
+    mesh_scenes = [load_mesh_scene(p) for p in meshes]
+    if indoor + outdoor + len(mesh_scenes) == 0:
+        raise ValueError("nothing to generate: pass indoor > 0, outdoor > 0 or a mesh")
+
+    plan: list[tuple[str, int, str]] = []  # (kind, index, folder name)
+    for kind, count in (("indoor", indoor), ("outdoor", outdoor)):
+        names = scene_names(kind)
+        plan += [(kind, i, f"{names[i % len(names)]}-{i:02d}") for i in range(count)]
+    plan += [("mesh", i, f"{s.name}-{i:02d}") for i, s in enumerate(mesh_scenes)]
+
+    from .. import __version__
+
+    settings = {
+        "indoor": indoor, "outdoor": outdoor, "views": views, "seed": seed,
+        "noise": [{"model": k, "settings": v} for k, v in models.items()],
+        "meshes": [Path(p).name for p in meshes],
+        "K": {"fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy},
+        "size": [h, w], "near": float(near), "constraints": constraints.as_dict(),
+    }
+    meta = {"format": FORMAT, "format_version": FORMAT_VERSION, "library_version": __version__,
+            "settings": settings, "scenes": [f"{k}/{n}" for k, _, n in plan],
+            "variants": ["clean", *models]}
+    root = Path(out)
+    if root.exists() and not root.is_dir():
+        raise ValueError(f"output {root} exists and is not a folder")
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OSError(f"cannot create output folder {root}: {exc.strerror or exc}") from exc
+    sidecar = root / "dataset.json"
+    if sidecar.is_file():
+        try:
+            old = json.loads(sidecar.read_text())
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{sidecar} is not valid JSON; use an empty output folder") from exc
+        if old.get("format") != FORMAT or old.get("settings") != settings:
+            raise ValueError(f"{root} holds a dataset made with other settings; pass the same "
+                             "settings to resume it, or use another output folder")
+    elif any(root.iterdir()):
+        raise ValueError(f"output folder {root} is not empty and holds no {FORMAT} dataset; "
+                         "use an empty or new folder")
+    try:
+        _write_json(sidecar, meta)
+    except OSError as exc:
+        raise OSError(f"cannot write to output folder {root}: {exc.strerror or exc}") from exc
+
+    bar = _Progress(len(plan) * views, progress)
+    written = skipped = 0
+    t_render = 0.0
+    try:
+        for kind, i, folder in plan:
+            kid = _KIND_ID[kind]
+            sdir = root / kind / folder
+            if kind == "mesh":
+                scene = mesh_scenes[i]
+                scene_seed = None
+            else:
+                scene_seed = int(np.random.SeedSequence([seed, kid, i, 0]).generate_state(1)[0])
+                scene = make_scene(scene_names(kind)[i % 10], seed=scene_seed)
+            poses = _scene_poses(sdir, scene, kind, scene_seed, seed, kid, i, views, cam, (h, w),
+                                 near, constraints)
+            for sub in ("normals", "valid", "clean", *models):
+                (sdir / sub).mkdir(parents=True, exist_ok=True)
+            for view in range(views):
+                done = _view_files(sdir, view, models)
+                if all(p.is_file() for p in done):
+                    skipped += 1
+                    bar.update()
+                    continue
+                t0 = time.perf_counter()
+                r = render_mesh(scene.vertices, scene.faces, cam, pose=poses[view], width=w,
+                                height=h, near=near)
+                t_render += time.perf_counter() - t0
+                if not np.any(r.face >= 0):
+                    raise ValueError(f"{kind}/{folder} view {view}: the camera sees nothing")
+                _save_npy(done[0], r.normals.astype(np.float32))
+                _save_npy(done[1], r.face >= 0)
+                _save_npy(done[2], r.depth.astype(np.float32))
+                for k, (name, st) in enumerate(models.items()):
+                    rng = _rng(seed, kid, i, 2 + _noise.MODELS.index(name), view)
+                    noisy = _apply_model(name, st, r, scene, poses[view], cam, (h, w), near, rng)
+                    _save_npy(done[3 + k], noisy.astype(np.float32))
+                written += 1
+                bar.update()
+    finally:
+        bar.close()
+    return SynthSummary(root, len(plan) * views, written, skipped, time.perf_counter() - t_start,
+                        t_render)
+
+
+def _view_files(sdir: Path, view: int, models: dict) -> list[Path]:
+    name = f"{view:04d}.npy"
+    return [sdir / "normals" / name, sdir / "valid" / name, sdir / "clean" / name,
+            *[sdir / m / name for m in models]]
+
+
+def _scene_poses(sdir: Path, scene: Scene, kind: str, scene_seed: int | None, seed: int, kid: int,
+                 i: int, views: int, cam, size, near, constraints) -> np.ndarray:
+    info = sdir / "scene.json"
+    if info.is_file():
+        data = json.loads(info.read_text())
+        poses = np.asarray(data["poses"], dtype=np.float64)
+        if poses.shape == (views, 4, 4):
+            return poses
+        raise ValueError(f"{info} holds {poses.shape[0]} poses; expected {views}")
+    poses = sample_poses(scene, views, rng=_rng(seed, kid, i, 1), K=cam, size=size,
+                         constraints=constraints)
+    sdir.mkdir(parents=True, exist_ok=True)
+    data = {"name": sdir.name, "kind": kind, **scene.meta, "scene_seed": scene_seed,
+            "n_faces": int(scene.faces.shape[0]), "n_vertices": int(scene.vertices.shape[0]),
+            "K": {"fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy}, "size": list(size),
+            "near": near, "pose_convention": "camera-to-world, OpenCV camera axes, world z up, metres",
+            "poses": poses.tolist()}
+    _write_json(info, data)
+    return poses
+
+
+def _apply_model(name: str, st: dict, r, scene: Scene, pose, cam, size, near, rng) -> np.ndarray:
+    if name == "gaussian":
+        return _noise.gaussian_noise(r.depth, cam, rng=rng, sigma=st["sigma"], sigma_px=st["sigma_px"])
+    if name == "kinect_v1":
+        return _noise.kinect_v1_noise(r.depth, r.normals, cam, rng=rng, focal=st["focal"],
+                                      baseline=st["baseline"], subpixel=st["subpixel"])
+    s = st["supersample"]
+    sub = None
+    if s > 1:
+        h, w = size
+        sub = render_subsamples(scene.vertices, scene.faces, cam, pose=pose, width=w, height=h,
+                                factor=s, mask=_noise.discontinuity_mask(r.depth), near=near)
+    return _noise.kinect_v2_noise(r.depth, r.normals, cam, rng=rng, subsamples=sub,
+                                  min_range=st["min_range"], max_range=st["max_range"],
+                                  dropout_deg=st["dropout_deg"],
+                                  dropout_width_deg=st["dropout_width_deg"], rounding=st["rounding"])
+
+
+def export_3f2n(root: str | Path, out: str | Path, *, variant: str = "clean") -> list[Path]:
+    """Export a generated dataset to the 3F2N dataset format, for the reference code.
+
+    Per scene ``out/<kind>/<scene>/``: ``depth/%06d.bin`` (little-endian float32, row-major;
+    pixels without depth are 1.0, the 3F2N background value), ``normal/%06d.png`` (16-bit
+    RGB, ``value = round((n + 1) / 2 * 65535)``, camera-facing normals, background
+    (65535, 65535, 65535)) and ``params.txt`` (``fx fy cx cy N`` with cx, cy on MATLAB's
+    1-based grid, i.e. ours + 1). Frames are numbered from 000001.
+
+    Parameters
+    ----------
+    root : str or Path
+        A dataset written by :func:`generate`.
+    out : str or Path
+        Output folder (created).
+    variant : str, keyword-only
+        ``"clean"`` or a noise model name present in the dataset.
+
+    Returns
+    -------
+    list of Path
+        The scene folders written.
+    """
+    root = Path(root)
+    sidecar = root / "dataset.json"
+    if not sidecar.is_file():
+        raise FileNotFoundError(f"{root} holds no {FORMAT} dataset (dataset.json missing)")
+    meta = json.loads(sidecar.read_text())
+    if variant not in meta["variants"]:
+        raise ValueError(f"variant {variant!r} not in the dataset; valid: {', '.join(meta['variants'])}")
+    out = Path(out)
+    written = []
+    for rel in meta["scenes"]:
+        sdir = root / rel
+        info = json.loads((sdir / "scene.json").read_text())
+        files = sorted((sdir / variant).glob("*.npy"))
+        dst = out / rel
+        (dst / "depth").mkdir(parents=True, exist_ok=True)
+        (dst / "normal").mkdir(parents=True, exist_ok=True)
+        for k, f in enumerate(files, start=1):
+            z = np.load(f).astype("<f4")
+            n = np.load(sdir / "normals" / f.name)
+            z = np.where(np.isfinite(z) & (z > 0), z, np.float32(1.0)).astype("<f4")
+            write_bytes_atomic(dst / "depth" / f"{k:06d}.bin", z.tobytes())
+            ok = np.all(np.isfinite(n), axis=-1)
+            enc = np.clip(np.rint((np.nan_to_num(n) + 1.0) * 0.5 * 65535.0), 0, 65535).astype(np.uint16)
+            enc[~ok] = 65535
+            write_png(dst / "normal" / f"{k:06d}.png", enc)
+        Kd = info["K"]
+        text = f"{Kd['fx']!r} {Kd['fy']!r} {Kd['cx'] + 1.0!r} {Kd['cy'] + 1.0!r} {len(files)}\n"
+        write_bytes_atomic(dst / "params.txt", text.encode())
+        written.append(dst)
+    return written
