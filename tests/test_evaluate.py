@@ -399,3 +399,35 @@ def test_group_levels_pool_groups(tiny_3f2n, tmp_path):
     assert s["frames"] == 3
     assert s["e_A"] == pytest.approx(np.mean([r["mean_deg"] for r in res.rows]), rel=1e-12)
     assert [r["group"] for r in res.rows] == ["Easy/box", "Easy/box", "Easy/sphere"]
+
+
+def test_generated_benchmark_equals_normal_metrics(tmp_path):
+    synth = pytest.importorskip("depthnormals.synth")
+    from depthnormals import cli
+
+    if "synth" not in cli.COMMANDS or not hasattr(synth, "generate"):
+        pytest.skip("the synthetic benchmark generator is not there yet")
+    root = tmp_path / "bench"
+    synth.generate(root, indoor=1, outdoor=1, views=1, seed=0, size=(60, 80),
+                   noise=("gaussian:sigma_px=0.1",), K=dn.Intrinsics(57.1, 57.1, 39.5, 29.5),
+                   progress=False)
+    try:
+        frames = list(dn.datasets.open(root))
+    except ValueError:
+        pytest.skip("datasets.open does not read the synthetic format yet")
+    assert len(frames) == 4
+    res = run_evaluation(root, "3f2n,d2nt", tmp_path / "out", figures=0, group_levels=[0, 2])
+    by = {(r["group"], r["frame"], r["method"]): r for r in res.rows}
+    for f in frames:
+        for method in ("3f2n", "d2nt"):
+            est = dn.estimate_normals(f.depth, f.K, method=method)
+            ref = dn.normal_metrics(est, f.normals, mask=_border_mask(f), folded=True)
+            row = by[(f.group, f.name, method)]
+            assert (row["mean_deg"], row["median_deg"], row["a11_25"], row["coverage"],
+                    row["count"]) == (ref.mean, ref.median, ref.a11_25, ref.coverage, ref.count)
+    groups = res.summary["groups"]
+    assert set(groups) == {"indoor/clean", "indoor/gaussian", "outdoor/clean",
+                           "outdoor/gaussian", "(all)"}
+    key = next(k for k in by if k[0].startswith("outdoor") and k[0].endswith("gaussian")
+               and k[2] == "d2nt")
+    assert groups["outdoor/gaussian"]["d2nt"]["e_A"] == by[key]["mean_deg"]
