@@ -19,7 +19,7 @@ import numpy as np
 
 __all__ = ["EstimatorInfo", "estimate_normals", "get_estimator", "methods", "register"]
 
-DEFAULT_METHOD = "3f2n"
+DEFAULT_METHOD = "3f2n+"
 
 
 @dataclass(frozen=True)

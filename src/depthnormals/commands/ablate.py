@@ -1,0 +1,123 @@
+"""``depthnormals ablate``: the 3F2N+ paper's ablation tables on any dataset folder.
+
+Table 1 (the paper's Table I): central tendency x gradient filter x depth curvature, each
+cell 3F2N with that filter and third filter, followed by the curvature selection of the DDM.
+Table 2 (the paper's Table II): 3F2N vs 3F2N + Pearson vs 3F2N + Kendall (selections alone),
+plus the readings and the full CRF. Errors: mean angular error in degrees, folded, over the
+frame's valid ground truth minus a 1-pixel border, mean of the per-frame means per group.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+HELP = "print the 3F2N+ ablation tables (Table I / II of the paper) for a dataset folder"
+
+TABLE1_AGGREGATES = ("median", "mean", "trimean", "trimmed-mean")
+TABLE1_CURVATURES = ("normal", "gauss", "max", "mean", "pixel-mean")
+TABLE2_ROWS = (
+    ("3F2N", None),
+    ("3F2N+ w/ Pearson", {"curvature": "none", "correlation": "pearson", "crf": False}),
+    ("3F2N+ w/ Kendall", {"curvature": "none", "correlation": "kendall", "crf": False}),
+    ("3F2N+ w/ Kendall (prose: argmax)",
+     {"curvature": "none", "correlation": "kendall-prose", "crf": False}),
+    ("3F2N+ mean curvature (default)", {}),
+    ("3F2N+ mean + Kendall + CRF", {"correlation": "kendall", "crf": True}),
+    ("3F2N+ mean + Pearson + CRF", {"correlation": "pearson", "crf": True}),
+    ("3F2N+ mean + CRF (no correlation)", {"correlation": "none", "crf": True}),
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("dataset", type=Path, nargs="?", default=None,
+                        help="any dataset folder depthnormals.datasets.open reads")
+    parser.add_argument("--table", type=int, choices=(1, 2), required=True,
+                        help="1: central tendency x filter x curvature; 2: correlations")
+    parser.add_argument("--analytic", action="store_true",
+                        help="use the built-in analytic scenes (clean and noisy) instead")
+    parser.add_argument("--kernels", default="fd,roberts",
+                        help="gradient filters for table 1 (comma-separated; default fd,roberts)")
+    parser.add_argument("--noise", type=float, default=0.1,
+                        help="noise of the noisy analytic frames, in units of z / f (default 0.1)")
+    parser.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    parser.add_argument("--limit", type=int, default=None, help="at most this many frames")
+
+
+def analytic_frames(noise: float = 0.1, seed: int = 0) -> Iterator:
+    """Frames of the analytic scenes with creases and occlusions, clean and noisy."""
+    from ..analytic import make_scene
+    from ..datasets import Frame
+
+    for name in ("box-on-floor", "stairs", "sphere-before-wall"):
+        r = make_scene(name).render()
+        K = np.array([[r.K.fx, 0, r.K.cx], [0, r.K.fy, r.K.cy], [0, 0, 1.0]])
+        mask = r.depth > 0
+        for level in (0.0, noise):
+            d = r.depth.copy()
+            if level:
+                rng = np.random.default_rng(seed)
+                d[mask] += rng.normal(size=int(mask.sum())) * level * d[mask] / r.K.fx
+            group = f"{name}/{'clean' if not level else f'noise{level:g}'}"
+            yield Frame(d, r.normals.astype(np.float32), K, mask.copy(), "0", group)
+
+
+def _score(n: np.ndarray, frame) -> float:
+    from ..metrics import normal_metrics
+
+    m = frame.mask.copy()
+    m[0] = m[-1] = False
+    m[:, 0] = m[:, -1] = False
+    return normal_metrics(n, frame.normals, mask=m, folded=True).mean
+
+
+def _print(title: str, groups: list[str], rows: list[tuple[str, dict[str, list[float]]]]) -> None:
+    width = max(len(r[0]) for r in rows) + 2
+    print(title)
+    print("".ljust(width) + "".join(g[-22:].rjust(24) for g in groups))
+    for label, vals in rows:
+        print(label.ljust(width) + "".join(f"{np.mean(vals[g]):24.3f}" for g in groups))
+
+
+def run(args: argparse.Namespace) -> int:
+    from .. import datasets
+    from ..ddm import discontinuity_discrimination
+    from ..estimators import three_filters_to_normal
+
+    if args.analytic == (args.dataset is not None):
+        raise ValueError("pass a DATASET folder or --analytic (exactly one)")
+    frames = analytic_frames(args.noise, args.seed) if args.analytic else datasets.open(args.dataset)
+    kernels = [k.strip() for k in args.kernels.split(",") if k.strip()]
+    results: dict[str, dict[str, list[float]]] = {}
+    groups: list[str] = []
+    for i, fr in enumerate(frames):
+        if args.limit is not None and i >= args.limit:
+            break
+        g = fr.group or "all"
+        if g not in groups:
+            groups.append(g)
+        if args.table == 1:
+            for agg in TABLE1_AGGREGATES:
+                for ker in kernels:
+                    base = three_filters_to_normal(fr.depth, fr.K, kernel=ker, aggregate=agg)
+                    label = f"{agg:<13} {ker:<8} none"
+                    results.setdefault(label, {}).setdefault(g, []).append(_score(base, fr))
+                    for curv in TABLE1_CURVATURES:
+                        n = discontinuity_discrimination(base, fr.depth, fr.K, curvature=curv)
+                        label = f"{agg:<13} {ker:<8} {curv}"
+                        results.setdefault(label, {}).setdefault(g, []).append(_score(n, fr))
+        else:
+            base = three_filters_to_normal(fr.depth, fr.K)
+            for label, opts in TABLE2_ROWS:
+                n = base if opts is None else discontinuity_discrimination(
+                    base, fr.depth, fr.K, **opts)
+                results.setdefault(label, {}).setdefault(g, []).append(_score(n, fr))
+    if not groups:
+        raise ValueError("the dataset has no frames")
+    title = ("Table 1: e_A (deg) by central tendency, gradient filter, depth curvature"
+             if args.table == 1 else "Table 2: e_A (deg), 3F2N vs correlation-based DDM")
+    _print(title, groups, list(results.items()))
+    return 0

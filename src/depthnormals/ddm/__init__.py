@@ -1,0 +1,20 @@
+"""The discontinuity discrimination module (DDM) of 3F2N+, a plug-in for every estimator.
+
+``discontinuity_discrimination(normals, depth, K, ...)`` refines the output of any estimator;
+``estimate_normals(..., method="<name>+")`` runs estimator ``<name>`` followed by it.
+``depth_curvature`` and ``kendall_map`` expose the two discriminators.
+"""
+
+from ._module import NEIGHBOURHOODS, discontinuity_discrimination
+from .correlation import CORRELATIONS, kendall_map
+from .curvature import CURVATURES, DERIVATIVES, depth_curvature
+
+__all__ = [
+    "CORRELATIONS",
+    "CURVATURES",
+    "DERIVATIVES",
+    "NEIGHBOURHOODS",
+    "depth_curvature",
+    "discontinuity_discrimination",
+    "kendall_map",
+]
