@@ -101,8 +101,13 @@ def _line(zm, z0, zp, off, inverse, minslope):
 
 
 @nb.njit(cache=True, inline="always")
+def _pow15(t):
+    return t * math.sqrt(t)
+
+
+@nb.njit(cache=True, inline="always")
 def _graph_curv(c1, c2):
-    return abs(c2) / (1.0 + c1 * c1) ** 1.5
+    return abs(c2) / _pow15(1.0 + c1 * c1)
 
 
 @nb.njit(cache=True, parallel=True)
@@ -126,12 +131,12 @@ def _directional(z, fx, fy, cx, cy, inverse, minslope, ku, kv, kg, kb):
             b = 0.0
             if oku:
                 zu, nu, a = _line(zl, z0, zr, u - cx, inverse, minslope)
-                ku[v, u] = fx * fx * abs(nu) / (a * a + fx * fx * zu * zu) ** 1.5
+                ku[v, u] = fx * fx * abs(nu) / _pow15(a * a + fx * fx * zu * zu)
             else:
                 ku[v, u] = _INF
             if okv:
                 zv, nv, b = _line(zt, z0, zb, v - cy, inverse, minslope)
-                kv[v, u] = fy * fy * abs(nv) / (b * b + fy * fy * zv * zv) ** 1.5
+                kv[v, u] = fy * fy * abs(nv) / _pow15(b * b + fy * fy * zv * zv)
             else:
                 kv[v, u] = _INF
             if oku and okv and a != 0.0 and b != 0.0:
@@ -238,7 +243,7 @@ def _pixel_line(zm, z0, zp):
     gl = z0 - zm
     gr = zp - z0
     g2 = min(gc * gc, min(gl * gl, gr * gr))
-    return abs(zm - 2.0 * z0 + zp) / (1.0 + g2) ** 1.5
+    return abs(zm - 2.0 * z0 + zp) / _pow15(1.0 + g2)
 
 
 @nb.njit(cache=True, parallel=True)
