@@ -14,7 +14,7 @@ from collections.abc import Sequence
 
 __all__ = ["COMMANDS", "main"]
 
-COMMANDS = ("estimate", "methods", "demo", "bench", "evaluate")
+COMMANDS = ("estimate", "methods", "demo", "bench", "evaluate", "synth")
 
 
 def build_parser() -> argparse.ArgumentParser:
