@@ -14,7 +14,9 @@ datasets, io                       readers and writers
 from __future__ import annotations
 
 from . import datasets, io
+from ._parallel import get_num_threads, set_num_threads
 from .camera import Intrinsics, as_intrinsics, backproject
+from .ddm import discontinuity_discrimination
 from .estimators import (
     angle_weighted,
     area_weighted,
@@ -45,9 +47,11 @@ __all__ = [
     "backproject",
     "d2nt",
     "datasets",
+    "discontinuity_discrimination",
     "estimate_normals",
     "fals",
     "get_estimator",
+    "get_num_threads",
     "io",
     "line_mod",
     "methods",
@@ -55,6 +59,7 @@ __all__ = [
     "plane_pca",
     "plane_svd",
     "sda_sne",
+    "set_num_threads",
     "sne_roadseg",
     "sri",
     "three_filters_to_normal",

@@ -14,7 +14,7 @@ from collections.abc import Sequence
 
 __all__ = ["COMMANDS", "main"]
 
-COMMANDS = ("estimate", "methods", "demo", "bench", "evaluate", "synth")
+COMMANDS = ("estimate", "methods", "demo", "bench", "evaluate", "ablate", "synth")
 
 
 def build_parser() -> argparse.ArgumentParser:
