@@ -110,7 +110,7 @@ def plot_fig3(path: str | Path, depth: np.ndarray, truth: np.ndarray, mask: np.n
 
 def plot_threshold_curves(path: str | Path, thresholds: Sequence[float],
                           curves: Mapping[str, Mapping[str, Sequence[float]]], *,
-                          title: str = "", xmax: float = 45.0, dpi: int = 110) -> None:
+                          title: str = "", xmax: float = 30.0, dpi: int = 110) -> None:
     """Error-vs-threshold curves, one panel per group and one line per method (PNG, atomic).
 
     Parameters
@@ -130,12 +130,13 @@ def plot_threshold_curves(path: str | Path, thresholds: Sequence[float],
     groups = list(curves)
     cols = min(len(groups), 3)
     rows = -(-len(groups) // cols)
-    fig = Figure(figsize=(4.2 * cols, 3.3 * rows), layout="constrained")
+    fig = Figure(figsize=(5.6 * cols, 4.0 * rows), layout="constrained")
     axes = fig.subplots(rows, cols, squeeze=False).ravel()
     t = np.asarray(thresholds)
     for ax, g in zip(axes, groups, strict=False):
-        for label, share in curves[g].items():
-            ax.plot(t, 100 * np.asarray(share, dtype=float), label=label, lw=1.3)
+        for i, (label, share) in enumerate(curves[g].items()):
+            ax.plot(t, 100 * np.asarray(share, dtype=float), label=label, lw=1.3,
+                    ls=("-", "--", ":", "-.")[(i // 10) % 4])
         for x in (11.25, 22.5, 30.0):
             ax.axvline(x, color="0.85", lw=0.8, zorder=0)
         ax.set_xlim(0, xmax)
