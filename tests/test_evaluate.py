@@ -269,7 +269,12 @@ def test_torusknot_reference_values(shared_data, tmp_path):
 
 
 def test_signed_border_score90_reach_the_rows(tiny_3f2n, tmp_path):
-    base = run_evaluation(tiny_3f2n, "3f2n", tmp_path / "a", figures=0, frames=1)
+    import numba
+
+    before = numba.get_num_threads()
+    base = run_evaluation(tiny_3f2n, "3f2n", tmp_path / "a", figures=0, frames=1, threads=1)
+    assert base.settings["timing"]["numba_threads"] == 1
+    assert numba.get_num_threads() == before          # restored after the run
     other = run_evaluation(tiny_3f2n, "3f2n", tmp_path / "a", figures=0, frames=1, border=5,
                            folded=False, invalid="score90")
     assert other.reused == 0 and other.computed == 1   # a new protocol is not reused
@@ -381,8 +386,9 @@ def test_frames_iterable_and_bad_input(tiny_3f2n, tmp_path):
         run_evaluation(tiny_3f2n, "3f2n", tmp_path, figure_method="d2nt")
     with pytest.raises(TypeError, match="unknown option"):
         run_evaluation(tiny_3f2n, "3f2n[colour=red]", tmp_path / "c", figures=0)
-    with pytest.raises(FileNotFoundError):
+    with pytest.raises(FileNotFoundError, match="does not exist"):
         run_evaluation(tmp_path / "missing", "3f2n", tmp_path / "d", figures=0)
+    assert not (tmp_path / "d").exists()     # nothing written for a missing dataset
 
 
 def test_import_stays_light():

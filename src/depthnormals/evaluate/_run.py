@@ -69,6 +69,8 @@ def _frames(dataset: Any, dataset_name: str | None) -> tuple[Iterator[Frame], st
 
     if isinstance(dataset, (str, Path)):
         path = Path(dataset)
+        if not path.exists():
+            raise FileNotFoundError(f"dataset path {path} does not exist")
         return iter(datasets.open(path)), str(path.resolve())
     if isinstance(dataset, Frame):
         dataset = [dataset]
@@ -119,6 +121,14 @@ def _row(frame: Frame, label: str, score: Any, ms: float) -> dict[str, Any]:
         "covered": score.covered, "near_count": score.near_count,
         "smooth_count": score.smooth_count, "ms": ms,
     }
+
+
+def _accumulate(hists: dict, group: str, label: str, hist: np.ndarray) -> None:
+    key = (group, label)
+    if key in hists:
+        hists[key] += hist
+    else:
+        hists[key] = hist.astype(np.int64, copy=True)
 
 
 def run_evaluation(
@@ -276,7 +286,8 @@ def run_evaluation(
 
     store = PartStore(out / "parts")
     rows: list[dict[str, Any]] = []
-    hists: list[np.ndarray] = []
+    # error histograms summed per (group, label): memory independent of the frame count
+    hists: dict[tuple[str, str], np.ndarray] = {}
     seen: set[tuple[str, str]] = set()
     fig_groups: set[str] = set()
     written: list[Path] = []
@@ -308,7 +319,7 @@ def run_evaluation(
                     row, hist = got
                     row.update(group=frame.group, frame=frame.name, method=spec.label)
                     rows.append(row)
-                    hists.append(hist)
+                    _accumulate(hists, frame.group, spec.label, hist)
                     reused += 1
                     continue
                 if spec.label not in warmed:
@@ -338,7 +349,7 @@ def run_evaluation(
                     store.save(key, row, hist)
                     computed += 1
                 rows.append(row)
-                hists.append(hist)
+                _accumulate(hists, frame.group, spec.label, hist)
             if want_fig:
                 fig_groups.add(frame.group)
                 path = fig_dir / f"fig3-{_safe(frame.group)}-{_safe(frame.name)}.png"

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -94,7 +94,7 @@ def _aggregate(rows: list[dict[str, Any]], hist: np.ndarray) -> dict[str, Any]:
     }
 
 
-def summarize(rows: Sequence[dict[str, Any]], hists: Sequence[np.ndarray],
+def summarize(rows: Sequence[dict[str, Any]], hists: Mapping[tuple[str, str], np.ndarray],
               labels: Sequence[str], *, group_key: Callable[[str], str] | None = None,
               curve_max: float = 90.0, curve_step: float = 0.25) -> dict[str, Any]:
     """Aggregate per-(frame, method) rows into per-(group, method) summaries.
@@ -103,8 +103,9 @@ def summarize(rows: Sequence[dict[str, Any]], hists: Sequence[np.ndarray],
     ----------
     rows : sequence of dict
         Rows of ``results.csv`` (see :data:`FIELDS`).
-    hists : sequence of ndarray
-        The error histogram of each row.
+    hists : mapping (group, label) -> ndarray
+        Error histograms (bins of :data:`HIST_BIN_DEG`) summed over the frames of each
+        (group, method label) of ``rows``.
     labels : sequence of str
         Method labels, in the order to report them.
     group_key : callable, optional
@@ -122,11 +123,14 @@ def summarize(rows: Sequence[dict[str, Any]], hists: Sequence[np.ndarray],
         there are several groups, ``"(all)"`` pools them all.
     """
     key = group_key if group_key is not None else (lambda g: g)
-    row_groups = [key(r["group"]) for r in rows]
+    index: dict[tuple[str, str], list[int]] = {}      # (summary group, label) -> row indices
     groups: list[str] = []
-    for g in row_groups:
+    for i, r in enumerate(rows):
+        g = key(r["group"])
         if g not in groups:
             groups.append(g)
+        index.setdefault((g, r["method"]), []).append(i)
+        index.setdefault((ALL_GROUPS, r["method"]), []).append(i)
     if len(groups) > 1:
         groups.append(ALL_GROUPS)
     thresholds = np.round(np.arange(0.0, curve_max + curve_step / 2, curve_step), 6)
@@ -135,11 +139,11 @@ def summarize(rows: Sequence[dict[str, Any]], hists: Sequence[np.ndarray],
         out["groups"][g] = {}
         out["curves"][g] = {}
         for label in labels:
-            idx = [i for i, r in enumerate(rows)
-                   if r["method"] == label and (g == ALL_GROUPS or row_groups[i] == g)]
+            idx = index.get((g, label))
             if not idx:
                 continue
-            hist = np.sum([hists[i] for i in idx], axis=0)
+            members = sorted({rows[i]["group"] for i in idx})
+            hist = np.sum([hists[(m, label)] for m in members], axis=0)
             out["groups"][g][label] = _aggregate([rows[i] for i in idx], hist)
             out["curves"][g][label] = threshold_curve(hist, thresholds).tolist()
     return out
