@@ -180,9 +180,7 @@ def render_mesh(vertices: Any, faces: Any, K: Any = KINECT_V2, *, pose: Any = No
     depth, face, face_normal = _run(Vc, F, cam, width, height, near, far, np.zeros((1, 2)),
                                     np.ones((height, width), dtype=np.bool_), 0.0)
     depth, face = depth[..., 0], face[..., 0]
-    hit = face >= 0
-    normals = face_normal[np.maximum(face, 0)] + 0.0  # no negative zeros
-    normals[~hit] = np.nan
+    normals = _raster.gather_normals(face, face_normal)
     return RenderResult(depth=depth, face=face, normals=normals, K=cam)
 
 
@@ -204,13 +202,13 @@ def _prepare(vertices, faces, K, pose, width, height, near, far):
 
 
 def _run(Vc, F, cam, width, height, near, far, offsets, mask, margin):
-    normal, offset, poly, nvert, fbox = _raster.setup_faces(
+    normal, offset, edges, nvert, fbox = _raster.setup_faces(
         Vc, F, cam.fx, cam.fy, cam.cx, cam.cy, width, height, near)
     active, bbox = _raster.int_boxes(nvert, fbox, margin, width, height)
     tiles_u = (width + _raster.TILE - 1) // _raster.TILE
     tiles_v = (height + _raster.TILE - 1) // _raster.TILE
     start, items = _raster.bin_faces(active, bbox, tiles_u, tiles_v)
-    depth, face = _raster.raster_tiles(normal, offset, poly, active, bbox, start, items,
+    depth, face = _raster.raster_tiles(normal, offset, edges, active, bbox, start, items,
                                        tiles_u, tiles_v, cam.fx, cam.fy, cam.cx, cam.cy,
                                        width, height, near, far, offsets, mask)
     return depth, face, normal

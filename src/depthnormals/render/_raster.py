@@ -19,80 +19,35 @@ TILE = 32
 _EDGE_TOL = 1e-9  # pixels
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, parallel=True)
 def setup_faces(vc, faces, fx, fy, cx, cy, width, height, near):  # pragma: no cover - compiled
-    """Per face: camera-facing unit normal, plane offset, projected clipped polygon and its
-    float bounding box (umin, umax, vmin, vmax); ``nvert`` is 0 for faces not drawn."""
+    """Per face: camera-facing unit normal, plane offset, the edge equations of the projected
+    clipped polygon (counter-clockwise; ``A u + B v + C`` is the signed distance in pixels,
+    >= 0 inside) and its float bounding box (umin, umax, vmin, vmax). ``nvert`` (the polygon's
+    vertex count) is 0 for faces not drawn."""
     nf = faces.shape[0]
     normal = np.zeros((nf, 3))
     offset = np.zeros(nf)
-    poly = np.zeros((nf, 4, 2))
+    edges = np.zeros((nf, 4, 3))
     nvert = np.zeros(nf, dtype=np.int32)
     fbox = np.zeros((nf, 4))
-    pts = np.empty((3, 3))
-    clip = np.empty((4, 3))
-    for f in range(nf):
-        nin = 0
-        for k in range(3):
-            for j in range(3):
-                pts[k, j] = vc[faces[f, k], j]
-            if pts[k, 2] >= near:
-                nin += 1
-        if nin == 0:
+    poly = np.empty((nf, 4, 2))  # scratch: clipped, projected polygon
+    for f in nb.prange(nf):
+        i0 = faces[f, 0]
+        i1 = faces[f, 1]
+        i2 = faces[f, 2]
+        z0 = vc[i0, 2]
+        z1 = vc[i1, 2]
+        z2 = vc[i2, 2]
+        if z0 < near and z1 < near and z2 < near:
             continue
-        # clip against z >= near
-        m = 0
-        for k in range(3):
-            k1 = (k + 1) % 3
-            in0 = pts[k, 2] >= near
-            in1 = pts[k1, 2] >= near
-            if in0:
-                clip[m, 0] = pts[k, 0]
-                clip[m, 1] = pts[k, 1]
-                clip[m, 2] = pts[k, 2]
-                m += 1
-            if in0 != in1:
-                t = (near - pts[k, 2]) / (pts[k1, 2] - pts[k, 2])
-                clip[m, 0] = pts[k, 0] + t * (pts[k1, 0] - pts[k, 0])
-                clip[m, 1] = pts[k, 1] + t * (pts[k1, 1] - pts[k, 1])
-                clip[m, 2] = near
-                m += 1
-        if m < 3:
-            continue
-        umin = np.inf
-        umax = -np.inf
-        vmin = np.inf
-        vmax = -np.inf
-        for k in range(m):
-            pu = fx * clip[k, 0] / clip[k, 2] + cx
-            pv = fy * clip[k, 1] / clip[k, 2] + cy
-            poly[f, k, 0] = pu
-            poly[f, k, 1] = pv
-            umin = min(umin, pu)
-            umax = max(umax, pu)
-            vmin = min(vmin, pv)
-            vmax = max(vmax, pv)
-        if umax < -1.0 or vmax < -1.0 or umin > width or vmin > height:
-            continue
-        # signed area; make the polygon counter-clockwise in (u, v)
-        area = 0.0
-        for k in range(m):
-            k1 = (k + 1) % m
-            area += poly[f, k, 0] * poly[f, k1, 1] - poly[f, k1, 0] * poly[f, k, 1]
-        if not abs(area) > 1e-12:
-            continue
-        if area < 0.0:
-            for k in range(m // 2):
-                for j in range(2):
-                    tmp = poly[f, k, j]
-                    poly[f, k, j] = poly[f, m - 1 - k, j]
-                    poly[f, m - 1 - k, j] = tmp
-        ax = pts[1, 0] - pts[0, 0]
-        ay = pts[1, 1] - pts[0, 1]
-        az = pts[1, 2] - pts[0, 2]
-        bx = pts[2, 0] - pts[0, 0]
-        by = pts[2, 1] - pts[0, 1]
-        bz = pts[2, 2] - pts[0, 2]
+        # plane first (cheap) and the edge-on test
+        ax = vc[i1, 0] - vc[i0, 0]
+        ay = vc[i1, 1] - vc[i0, 1]
+        az = z1 - z0
+        bx = vc[i2, 0] - vc[i0, 0]
+        by = vc[i2, 1] - vc[i0, 1]
+        bz = z2 - z0
         nx = ay * bz - az * by
         ny = az * bx - ax * bz
         nz = ax * by - ay * bx
@@ -102,11 +57,60 @@ def setup_faces(vc, faces, fx, fy, cx, cy, width, height, near):  # pragma: no c
         nx /= ln
         ny /= ln
         nz /= ln
-        c = nx * pts[0, 0] + ny * pts[0, 1] + nz * pts[0, 2]
+        c = nx * vc[i0, 0] + ny * vc[i0, 1] + nz * z0
         if c > 0.0:  # orient toward the camera: n . X = c < 0 on the plane
-            nx, ny, nz, c = -nx, -ny, -nz, -c
+            nx = -nx
+            ny = -ny
+            nz = -nz
+            c = -c
         if c == 0.0:  # the plane passes through the camera: seen edge-on
             continue
+        # clip against z >= near (Sutherland-Hodgman), project
+        pu = poly[f, :, 0]
+        pv = poly[f, :, 1]
+        m = 0
+        for k in range(3):
+            ia = faces[f, k]
+            ib = faces[f, (k + 1) % 3]
+            xa, ya, za = vc[ia, 0], vc[ia, 1], vc[ia, 2]
+            xb, yb, zb = vc[ib, 0], vc[ib, 1], vc[ib, 2]
+            if za >= near:
+                pu[m] = fx * xa / za + cx
+                pv[m] = fy * ya / za + cy
+                m += 1
+            if (za >= near) != (zb >= near):
+                t = (near - za) / (zb - za)
+                pu[m] = fx * (xa + t * (xb - xa)) / near + cx
+                pv[m] = fy * (ya + t * (yb - ya)) / near + cy
+                m += 1
+        umin = pu[0]
+        umax = pu[0]
+        vmin = pv[0]
+        vmax = pv[0]
+        for k in range(1, m):
+            umin = min(umin, pu[k])
+            umax = max(umax, pu[k])
+            vmin = min(vmin, pv[k])
+            vmax = max(vmax, pv[k])
+        if umax < -1.0 or vmax < -1.0 or umin > width or vmin > height:
+            continue
+        area = 0.0
+        for k in range(m):
+            k1 = (k + 1) % m
+            area += pu[k] * pv[k1] - pu[k1] * pv[k]
+        if not abs(area) > 1e-12:
+            continue
+        sgn = 1.0 if area > 0.0 else -1.0
+        for k in range(m):
+            k1 = (k + 1) % m
+            ex = pu[k1] - pu[k]
+            ey = pv[k1] - pv[k]
+            le = np.sqrt(ex * ex + ey * ey)
+            if le == 0.0:  # repeated vertex after clipping: no constraint
+                continue
+            edges[f, k, 0] = -sgn * ey / le
+            edges[f, k, 1] = sgn * ex / le
+            edges[f, k, 2] = sgn * (ey * pu[k] - ex * pv[k]) / le
         normal[f, 0] = nx
         normal[f, 1] = ny
         normal[f, 2] = nz
@@ -116,7 +120,7 @@ def setup_faces(vc, faces, fx, fy, cx, cy, width, height, near):  # pragma: no c
         fbox[f, 1] = umax
         fbox[f, 2] = vmin
         fbox[f, 3] = vmax
-    return normal, offset, poly, nvert, fbox
+    return normal, offset, edges, nvert, fbox
 
 
 @nb.njit(cache=True)
@@ -170,7 +174,7 @@ def bin_faces(nvert, bbox, tiles_u, tiles_v):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, parallel=True)
-def raster_tiles(normal, offset, poly, nvert, bbox, start, items, tiles_u, tiles_v,
+def raster_tiles(normal, offset, edges, nvert, bbox, start, items, tiles_u, tiles_v,
                  fx, fy, cx, cy, width, height, near, far, offsets, mask):  # pragma: no cover
     """Z-buffer every tile at the sample positions ``(u, v) + offsets[s]`` of the pixels where
     ``mask`` is True. Returns depth (H, W, S) (0 = no surface, NaN = not sampled) and face
@@ -186,7 +190,6 @@ def raster_tiles(normal, offset, poly, nvert, bbox, start, items, tiles_u, tiles
         tv0 = tv * TILE
         tu1 = min(tu0 + TILE, width) - 1
         tv1 = min(tv0 + TILE, height) - 1
-        edges = np.empty((4, 3))
         for i in range(start[t], start[t + 1]):
             f = items[i]
             m = nvert[f]
@@ -194,26 +197,10 @@ def raster_tiles(normal, offset, poly, nvert, bbox, start, items, tiles_u, tiles
             u1 = min(bbox[f, 1], tu1)
             v0 = max(bbox[f, 2], tv0)
             v1 = min(bbox[f, 3], tv1)
-            nx = normal[f, 0]
-            ny = normal[f, 1]
-            nz = normal[f, 2]
+            nx = normal[f, 0] / fx
+            ny = normal[f, 1] / fy
+            n0 = normal[f, 2] - nx * cx - ny * cy
             c = offset[f]
-            # edge k: signed distance in pixels, e = A u + B v + C >= 0 inside
-            for k in range(m):
-                k1 = k + 1 if k + 1 < m else 0
-                ax = poly[f, k, 0]
-                ay = poly[f, k, 1]
-                ex = poly[f, k1, 0] - ax
-                ey = poly[f, k1, 1] - ay
-                le = np.sqrt(ex * ex + ey * ey)
-                if le == 0.0:  # repeated vertex after clipping: no constraint
-                    edges[k, 0] = 0.0
-                    edges[k, 1] = 0.0
-                    edges[k, 2] = 0.0
-                    continue
-                edges[k, 0] = -ey / le
-                edges[k, 1] = ex / le
-                edges[k, 2] = (ey * ax - ex * ay) / le
             for v in range(v0, v1 + 1):
                 for u in range(u0, u1 + 1):
                     if not mask[v, u]:
@@ -223,12 +210,12 @@ def raster_tiles(normal, offset, poly, nvert, bbox, start, items, tiles_u, tiles
                         sv = v + offsets[s, 1]
                         inside = True
                         for k in range(m):
-                            if edges[k, 0] * su + edges[k, 1] * sv + edges[k, 2] < -_EDGE_TOL:
+                            if edges[f, k, 0] * su + edges[f, k, 1] * sv + edges[f, k, 2] < -_EDGE_TOL:
                                 inside = False
                                 break
                         if not inside:
                             continue
-                        den = nx * (su - cx) / fx + ny * (sv - cy) / fy + nz
+                        den = nx * su + ny * sv + n0
                         if not den < 0.0:
                             continue
                         z = c / den
@@ -244,3 +231,16 @@ def raster_tiles(normal, offset, poly, nvert, bbox, start, items, tiles_u, tiles
                 for s in range(ns):
                     depth[v, u, s] = np.nan
     return depth, face
+
+
+@nb.njit(cache=True, parallel=True)
+def gather_normals(face, normal):  # pragma: no cover - compiled
+    """(H, W, 3) normals of the faces in ``face`` (H, W); NaN where ``face`` < 0."""
+    h, w = face.shape
+    out = np.empty((h, w, 3))
+    for v in nb.prange(h):
+        for u in range(w):
+            f = face[v, u]
+            for j in range(3):
+                out[v, u, j] = normal[f, j] + 0.0 if f >= 0 else np.nan
+    return out
