@@ -437,3 +437,19 @@ def test_generated_benchmark_equals_normal_metrics(tmp_path):
     key = next(k for k in by if k[0].startswith("outdoor") and k[0].endswith("gaussian")
                and k[2] == "d2nt")
     assert groups["outdoor/gaussian"]["d2nt"]["e_A"] == by[key]["mean_deg"]
+
+
+@pytest.mark.parametrize("with_tqdm", [True, False])
+def test_progress_bar_or_plain_lines(tiny_3f2n, tmp_path, monkeypatch, capsys, with_tqdm):
+    if with_tqdm:
+        pytest.importorskip("tqdm")
+    else:
+        monkeypatch.setitem(sys.modules, "tqdm", None)     # import tqdm -> ImportError
+    run_evaluation(tiny_3f2n, "d2nt", tmp_path, figures=0, frames=2, progress=True)
+    err = capsys.readouterr().err
+    if with_tqdm:
+        assert "evaluate" in err and "2/2" in err
+    else:
+        assert err.splitlines() == [
+            "evaluate: frame 1 Easy/box/000001 (1 computed, 0 reused)",
+            "evaluate: frame 2 Easy/box/000002 (2 computed, 0 reused)"]
