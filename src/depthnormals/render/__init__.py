@@ -173,7 +173,7 @@ def render_mesh(vertices: Any, faces: Any, K: Any = KINECT_V2, *, pose: Any = No
     >>> import numpy as np
     >>> V = np.array([[-1, -1, 3.0], [1, -1, 3.0], [0, 1, 3.0]])
     >>> r = render_mesh(V, [[0, 1, 2]], (100.0, 100.0, 15.5, 15.5), width=32, height=32)
-    >>> float(r.depth[15, 15]), int(r.face[15, 15]), int(r.face[0, 0])
+    >>> float(r.depth[15, 15]), int(r.face[15, 15]), int(r.face[31, 0])
     (3.0, 0, -1)
     """
     cam, Vc, F, width, height, near, far = _prepare(vertices, faces, K, pose, width, height, near, far)
