@@ -150,7 +150,7 @@ def _slot(t, d, z, parity):
 
 
 @nb.njit(cache=True, error_model="numpy", fastmath=_FASTMATH)
-def _fd_row(zp, zc, zn, v, fx, fy, cx, cy, mode, bx, by, bz, flag):
+def _fd_row(zp, zc, zn, Dp, Dc, Dn, v, fx, fy, cx, cy, mode, bx, by, bz, flag):
     """Branch-free (vectorisable) FD 3F2N over the interior of one row.
 
     ``nz_i = -(gu a + gv b) - (gu du_i + gv dv_i) z_i / (z_i - z_q)`` with a = u - cx,
@@ -170,8 +170,8 @@ def _fd_row(zp, zc, zn, v, fx, fy, cx, cy, mode, bx, by, bz, flag):
         z5 = np.float64(zn[u - 1])
         z6 = np.float64(zn[u])
         z7 = np.float64(zn[u + 1])
-        gu = 0.5 * (1.0 / z4 - 1.0 / z3)
-        gv = 0.5 * (1.0 / z6 - 1.0 / z1)
+        gu = 0.5 * (Dc[u + 1] - Dc[u - 1])
+        gv = 0.5 * (Dn[u] - Dp[u])
         d0 = z0 - zq
         d1 = z1 - zq
         d2 = z2 - zq
@@ -231,7 +231,8 @@ def _threefn_rows(v0, v1, z, D, fx, fy, cx, cy, deriv, smooth, roberts, mode, fa
     for v in range(v0, v1):
         flag[:] = True
         if fast_fd and 0 < v < h - 1 and w > 2:
-            _fd_row(z[v - 1], z[v], z[v + 1], v, fx, fy, cx, cy, mode, bx, by, bz, flag)
+            _fd_row(z[v - 1], z[v], z[v + 1], D[v - 1], D[v], D[v + 1], v, fx, fy, cx, cy, mode,
+                    bx, by, bz, flag)
             for u in range(1, w - 1):
                 out[v, u, 0] = bx[u]
                 out[v, u, 1] = by[u]
