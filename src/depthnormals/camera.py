@@ -91,10 +91,13 @@ def as_intrinsics(K: Any) -> Intrinsics:
             "K must be an Intrinsics, a 3x3 matrix, (fx, fy, cx, cy) or a mapping; "
             f"got {type(K).__name__}"
         )
-    try:
-        M = np.asarray(K, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"K must be numeric (3x3 matrix or fx, fy, cx, cy); got {K!r}") from exc
+    raw = np.asarray(K)
+    if raw.dtype == bool or raw.dtype.kind not in "iuf":
+        raise TypeError(
+            "K must hold real numbers (a 3x3 matrix or fx, fy, cx, cy); "
+            f"got dtype {raw.dtype} from {K!r}"
+        )
+    M = raw.astype(np.float64)
     if M.shape == (4,):
         return Intrinsics(*M.tolist())
     if M.shape == (3, 3):
