@@ -92,7 +92,11 @@ def as_intrinsics(K: Any) -> Intrinsics:
             f"got {type(K).__name__}"
         )
     raw = np.asarray(K)
-    if raw.dtype == bool or raw.dtype.kind not in "iuf":
+    mixed = not isinstance(K, np.ndarray) and any(
+        isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating))
+        for x in np.asarray(K, dtype=object).ravel()
+    )
+    if mixed or raw.dtype == bool or raw.dtype.kind not in "iuf":
         raise TypeError(
             "K must hold real numbers (a 3x3 matrix or fx, fy, cx, cy); "
             f"got dtype {raw.dtype} from {K!r}"
