@@ -1,15 +1,17 @@
 """Speed and accuracy of the comparison family, side by side with peers, in one run.
 
-Usage: python benchmarks/family.py [--repeats N]
+Usage: python benchmarks/family.py [--repeats N] [--methods a,b,...]
 
-Single thread (numba and OpenCV), 640x480 box-on-floor analytic scene, one warm-up call,
-median of the repeats. Wall time and process (CPU) time are both reported: on a shared,
-loaded machine the CPU time is the fairer of the two.
+Single thread (``depthnormals.set_num_threads(1)``, ``cv2.setNumThreads(1)``), 640x480
+box-on-floor analytic scene, one warm-up call, then median and minimum of the repeats.
+Wall time and process (CPU) time are both reported: on a shared, loaded machine the CPU
+time and the minimum are the fairer numbers.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import platform
 import time
 
@@ -24,6 +26,7 @@ FAMILY = ("sda-sne", "sne-roadseg", "fals", "sri", "line-mod", "plane-svd", "pla
 
 
 def timed(f, repeats):
+    """(median wall, min wall, median CPU, min CPU) in ms, after one warm-up call."""
     f()
     wall, cpu = [], []
     for _ in range(repeats):
@@ -31,24 +34,27 @@ def timed(f, repeats):
         f()
         wall.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
-    return 1000 * float(np.median(wall)), 1000 * float(np.median(cpu))
+    w, c = 1000 * np.array(wall), 1000 * np.array(cpu)
+    return float(np.median(w)), float(w.min()), float(np.median(c)), float(c.min())
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--repeats", type=int, default=15)
+    ap.add_argument("--repeats", type=int, default=20)
+    ap.add_argument("--methods", default=",".join(FAMILY),
+                    help="comma-separated subset of the estimators (OpenCV rows always run)")
     args = ap.parse_args()
-    numba.set_num_threads(1)
+    dn.set_num_threads(1)
     r = make_scene("box-on-floor").render()
     depth = r.depth.astype(np.float32)
     K = r.K.matrix
     inner = planar_interior(r, 6)
     rows = []
-    for m in FAMILY:
+    for m in args.methods.split(","):
         n = dn.estimate_normals(depth, K, method=m)
-        wall, cpu = timed(lambda m=m: dn.estimate_normals(depth, K, method=m), args.repeats)
+        t = timed(lambda m=m: dn.estimate_normals(depth, K, method=m), args.repeats)
         err = dn.angular_error(n, r.normals)[inner]
-        rows.append((m, wall, cpu, float(np.nanmean(err)), float(np.isnan(err).mean())))
+        rows.append((m, *t, float(np.nanmean(err)), float(np.isnan(err).mean())))
     try:
         import cv2
         cv2.setNumThreads(1)
@@ -65,17 +71,19 @@ def main() -> None:
                 def call(est=est):  # from depth, as ours: depthTo3d included
                     return est.apply(cv2.rgbd.depthTo3d(depth, k32))
             n = call()
-            wall, cpu = timed(call, args.repeats)
+            t = timed(call, args.repeats)
             err = dn.angular_error(n, r.normals, folded=True)[inner]
-            rows.append((name, wall, cpu, float(np.nanmean(err)), float(np.isnan(err).mean())))
+            rows.append((name, *t, float(np.nanmean(err)), float(np.isnan(err).mean())))
     except (ImportError, AttributeError) as exc:
         print(f"(OpenCV rgbd not available: {exc})")
     print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, "
-          f"python {platform.python_version()}, numba {numba.__version__}, 1 thread")
-    print("| method | wall ms | CPU ms | mean error on planar interiors (deg) | NaN share there |")
-    print("|---|---:|---:|---:|---:|")
-    for m, wall, cpu, e, nan in rows:
-        print(f"| {m} | {wall:.2f} | {cpu:.2f} | {e:.4f} | {nan:.3f} |")
+          f"{os.cpu_count()} CPUs, python {platform.python_version()}, numba {numba.__version__}, "
+          f"1 thread, {args.repeats} repeats, load average {os.getloadavg()[0]:.1f}")
+    print("| method | wall ms median | wall ms min | CPU ms median | CPU ms min "
+          "| mean error on planar interiors (deg) | NaN share there |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for m, wm, wn, cm, cn, e, nan in rows:
+        print(f"| {m} | {wm:.2f} | {wn:.2f} | {cm:.2f} | {cn:.2f} | {e:.4f} | {nan:.3f} |")
 
 
 if __name__ == "__main__":

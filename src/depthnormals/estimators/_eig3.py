@@ -6,12 +6,12 @@ import math
 
 import numba as nb
 
-__all__ = ["smallest_eigenvector"]
+__all__ = ["smallest_eigenvector", "smallest_eigenvector_newton"]
 
 _TWO_PI_3 = 2.0 * math.pi / 3.0
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def smallest_eigenvector(a00, a01, a02, a11, a12, a22):
     """Unit eigenvector of the smallest eigenvalue of the symmetric matrix [[a00 a01 a02] ...].
 
@@ -72,3 +72,64 @@ def smallest_eigenvector(a00, a01, a02, a11, a12, a22):
         return math.nan, math.nan, math.nan
     s = 1.0 / math.sqrt(d)
     return x * s, y * s, z * s
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def smallest_eigenvector_newton(a00, a01, a02, a11, a12, a22):
+    """As :func:`smallest_eigenvector` for a positive semi-definite matrix, without
+    trigonometry or branches (so that loops calling it vectorise); returns (x, y, z, ok).
+
+    The smallest eigenvalue is the smallest root of the characteristic cubic, reached by
+    Newton's method from 0: below the smallest root the cubic is increasing and concave, so
+    the iterates rise monotonically to it (quadratically once close, which they are from the
+    start when the smallest eigenvalue is well separated, as for a surface patch). ``ok`` is
+    False when the iteration has not settled to rounding, when the eigenvalue is not simple
+    or the input not finite: the caller then uses :func:`smallest_eigenvector`.
+    """
+    m = max(abs(a00), abs(a01), abs(a02), abs(a11), abs(a12), abs(a22))
+    a00 /= m
+    a01 /= m
+    a02 /= m
+    a11 /= m
+    a12 /= m
+    a22 /= m
+    # f(l) = l^3 - c2 l^2 + c1 l - c0
+    c2 = a00 + a11 + a22
+    c1 = a00 * a11 - a01 * a01 + a00 * a22 - a02 * a02 + a11 * a22 - a12 * a12
+    c0 = (a00 * (a11 * a22 - a12 * a12) - a01 * (a01 * a22 - a12 * a02)
+          + a02 * (a01 * a12 - a11 * a02))
+    lam = 0.0
+    step = 0.0
+    for _ in range(4):
+        f = ((lam - c2) * lam + c1) * lam - c0
+        df = (3.0 * lam - 2.0 * c2) * lam + c1
+        step = f / df
+        lam -= step
+    r00 = a00 - lam
+    r11 = a11 - lam
+    r22 = a22 - lam
+    c0x = a01 * a12 - a02 * r11
+    c0y = a02 * a01 - r00 * a12
+    c0z = r00 * r11 - a01 * a01
+    c1x = a01 * r22 - a02 * a12
+    c1y = a02 * a02 - r00 * r22
+    c1z = r00 * a12 - a01 * a02
+    c2x = r11 * r22 - a12 * a12
+    c2y = a12 * a02 - a01 * r22
+    c2z = a01 * a12 - r11 * a02
+    d0 = c0x * c0x + c0y * c0y + c0z * c0z
+    d1 = c1x * c1x + c1y * c1y + c1z * c1z
+    d2 = c2x * c2x + c2y * c2y + c2z * c2z
+    b0 = d0 >= d1 and d0 >= d2
+    b1 = (not b0) and d1 >= d2
+    x = c0x if b0 else (c1x if b1 else c2x)
+    y = c0y if b0 else (c1y if b1 else c2y)
+    z = c0z if b0 else (c1z if b1 else c2z)
+    d = d0 if b0 else (d1 if b1 else d2)
+    s = 1.0 / math.sqrt(d)
+    # settled: after the last step the error is ~ step^2 / gap (quadratic convergence) and
+    # sqrt(d) ~ gap on this unit-scale matrix; d well above the rank <= 1 threshold of
+    # smallest_eigenvector
+    ok = (m > 0.0 and m < math.inf and step * step <= 1e-17 * math.sqrt(d) and d > 1e-12
+          and lam == lam)
+    return x * s, y * s, z * s, ok

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import functools
 import math
 from typing import Any
 
 import numba as nb
 import numpy as np
 
+from .._parallel import run_rows
 from .._validate import check_positive
 from ..registry import register
 from ._common import new_output, prepare, store_normal
@@ -20,145 +20,217 @@ __all__ = ["fals", "line_mod", "sri"]
 
 # ----------------------------------------------------------------------------------- FALS
 
-@nb.njit(cache=True, parallel=True)
-def _fals_full_inverse(h, w, fx, fy, cx, cy, r):
-    """Inverse of M = sum v v^T over the full (clipped) window at every pixel (6 entries)."""
-    out = np.empty((h, w, 6))
-    for v in nb.prange(h):
-        for u in range(w):
-            m00 = m01 = m02 = m11 = m12 = m22 = 0.0
-            for rr in range(max(v - r, 0), min(v + r + 1, h)):
-                y = (rr - cy) / fy
-                for cc in range(max(u - r, 0), min(u + r + 1, w)):
-                    x = (cc - cx) / fx
-                    s = 1.0 / (x * x + y * y + 1.0)
-                    m00 += x * x * s
-                    m01 += x * y * s
-                    m02 += x * s
-                    m11 += y * y * s
-                    m12 += y * s
-                    m22 += s
-            c00 = m11 * m22 - m12 * m12
-            c01 = m02 * m12 - m01 * m22
-            c02 = m01 * m12 - m02 * m11
-            c11 = m00 * m22 - m02 * m02
-            c12 = m01 * m02 - m00 * m12
-            c22 = m00 * m11 - m01 * m01
-            det = m00 * c00 + m01 * c01 + m02 * c02
-            out[v, u, 0] = c00 / det
-            out[v, u, 1] = c01 / det
-            out[v, u, 2] = c02 / det
-            out[v, u, 3] = c11 / det
-            out[v, u, 4] = c12 / det
-            out[v, u, 5] = c22 / det
-    return out
+_NUMPY = "numpy"  # error_model: float division by zero gives inf/NaN, never raises
 
 
-@functools.lru_cache(maxsize=4)
-def _fals_cache(h: int, w: int, fx: float, fy: float, cx: float, cy: float,
-                r: int) -> np.ndarray:
-    # depth-independent, like the cache of OpenCV's RgbdNormals object
-    return _fals_full_inverse(h, w, fx, fy, cx, cy, r)
-
-
-@nb.njit(cache=True, parallel=True)
-def _fals_rows(z, fx, fy, cx, cy, r, hb):
-    """Row pass: windowed sums of b = v / range over valid pixels, and the valid count."""
+@nb.njit(cache=True, error_model=_NUMPY)
+def _fals_pixel(z, v, u, fx, fy, cx, cy, r, out):
+    """FALS at one pixel from the valid pixels of its (clipped) window, with M solved by its
+    adjugate; NaN when the valid pixel positions are collinear (M singular)."""
     h, w = z.shape
-    for v in nb.prange(h):
-        y = (v - cy) / fy
-        b0 = np.zeros(w + 1)
-        b1 = np.zeros(w + 1)
-        b2 = np.zeros(w + 1)
-        bc = np.zeros(w + 1)
-        for u in range(w):  # prefix sums along the row
-            zz = z[v, u]
-            x = (u - cx) / fx
-            t0 = t1 = t2 = tc = 0.0
-            if zz == zz:
-                k = 1.0 / ((x * x + y * y + 1.0) * zz)  # v / range = (x, y, 1) / (s z)
-                t0 = x * k
-                t1 = y * k
-                t2 = k
-                tc = 1.0
-            b0[u + 1] = b0[u] + t0
-            b1[u + 1] = b1[u] + t1
-            b2[u + 1] = b2[u] + t2
-            bc[u + 1] = bc[u] + tc
-        for u in range(w):
-            lo = max(u - r, 0)
-            hi = min(u + r + 1, w)
-            hb[v, u, 0] = b0[hi] - b0[lo]
-            hb[v, u, 1] = b1[hi] - b1[lo]
-            hb[v, u, 2] = b2[hi] - b2[lo]
-            hb[v, u, 3] = bc[hi] - bc[lo]
+    zq = z[v, u]
+    out[v, u, 0] = np.nan
+    out[v, u, 1] = np.nan
+    out[v, u, 2] = np.nan
+    if not (zq == zq):
+        return
+    m00 = m01 = m02 = m11 = m12 = m22 = 0.0
+    s0 = s1 = s2 = 0.0
+    n = 0
+    su = sv = suu = suv = svv = 0.0
+    for rr in range(max(v - r, 0), min(v + r + 1, h)):
+        y = (rr - cy) / fy
+        for cc in range(max(u - r, 0), min(u + r + 1, w)):
+            zz = z[rr, cc]
+            if not (zz == zz):
+                continue
+            x = (cc - cx) / fx
+            s = 1.0 / (x * x + y * y + 1.0)
+            m00 += x * x * s
+            m01 += x * y * s
+            m02 += x * s
+            m11 += y * y * s
+            m12 += y * s
+            m22 += s
+            k = s / zz  # v / range = (x, y, 1) / (s^-1 z)
+            s0 += x * k
+            s1 += y * k
+            s2 += k
+            du = cc - u
+            dv = rr - v
+            n += 1
+            su += du
+            sv += dv
+            suu += du * du
+            suv += du * dv
+            svv += dv * dv
+    # pixel positions collinear <=> rays coplanar with the centre <=> M singular
+    if n < 3 or (n * suu - su * su) * (n * svv - sv * sv) - (n * suv - su * sv) ** 2 <= 0:
+        return
+    c00 = m11 * m22 - m12 * m12
+    c01 = m02 * m12 - m01 * m22
+    c02 = m01 * m12 - m02 * m11
+    c11 = m00 * m22 - m02 * m02
+    c12 = m01 * m02 - m00 * m12
+    c22 = m00 * m11 - m01 * m01
+    nx = c00 * s0 + c01 * s1 + c02 * s2  # adj(M) b: det(M) > 0 only scales
+    ny = c01 * s0 + c11 * s1 + c12 * s2
+    nz = c02 * s0 + c12 * s1 + c22 * s2
+    store_normal(out, v, u, nx, ny, nz, (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
 
 
-@nb.njit(cache=True, parallel=True)
-def _fals_solve(z, fx, fy, cx, cy, r, hb, minv, out):
+# Vectorisable loops: every loop index starts at 0 on a view, so LLVM sees non-negative,
+# affine indices (a runtime offset such as ``a[u + i]`` keeps numba's negative-index
+# wraparound and blocks vectorisation), and each loop writes one array.
+
+@nb.njit(cache=True, error_model=_NUMPY, inline="always")
+def _box(src, dst, r):
+    """dst[r + k] = sum of src[k .. k + 2r] for k in 0 .. w-2r-1."""
+    m = src.size - 2 * r
+    if m <= 0:
+        return
+    d = dst[r:r + m]
+    s0 = src[0:m]
+    for k in range(m):
+        d[k] = s0[k]
+    for i in range(1, 2 * r + 1):
+        si = src[i:i + m]
+        for k in range(m):
+            d[k] += si[k]
+
+
+@nb.njit(cache=True, error_model=_NUMPY, inline="always")
+def _axpy(dst, a, src):
+    """dst += a src (same length)."""
+    for k in range(dst.size):
+        dst[k] += a * src[k]
+
+
+@nb.njit(cache=True, error_model=_NUMPY)
+def _fals_hrow(z, rr, xs, cy, fy, r, slot, hk, hxk, hs, hxs, hxxs, krow, srow):
+    """Horizontal window sums of k = s / z, x k (depth) and s, x s, x^2 s (geometry) of row
+    rr, s = 1 / (x^2 + y^2 + 1), into ring slot ``slot`` (columns r .. w-r-1)."""
+    w = xs.size
+    y = (rr - cy) / fy
+    y2 = y * y + 1.0
+    zr = z[rr]
+    for c in range(w):
+        srow[c] = 1.0 / (xs[c] * xs[c] + y2)
+    for c in range(w):
+        krow[c] = srow[c] / np.float64(zr[c])  # NaN propagates from invalid depth
+    _box(krow, hk[slot], r)
+    _box(srow, hs[slot], r)
+    for c in range(w):
+        krow[c] *= xs[c]
+    for c in range(w):
+        srow[c] *= xs[c]
+    _box(krow, hxk[slot], r)
+    _box(srow, hxs[slot], r)
+    for c in range(w):
+        srow[c] *= xs[c]
+    _box(srow, hxxs[slot], r)
+
+
+@nb.njit(cache=True, error_model=_NUMPY)
+def _fals_vrow(v, cy, fy, r, hk, hxk, hs, hxs, hxxs, xs, acc, bx, by, bz, flag):
+    """Vertical sums over the ring, then n ~ adj(M) b, oriented and normalised (interior of
+    row v; a window with an invalid pixel gives NaN and is flagged)."""
+    n = 2 * r + 1
+    w = xs.size
+    lo = r
+    hi = w - r
+    acc[:, lo:hi] = 0.0
+    for j in range(n):
+        rr = v - r + j
+        y = (rr - cy) / fy
+        slot = rr % n
+        _axpy(acc[0, lo:hi], 1.0, hxk[slot, lo:hi])
+        _axpy(acc[1, lo:hi], y, hk[slot, lo:hi])
+        _axpy(acc[2, lo:hi], 1.0, hk[slot, lo:hi])
+        _axpy(acc[3, lo:hi], 1.0, hxxs[slot, lo:hi])
+        _axpy(acc[4, lo:hi], y, hxs[slot, lo:hi])
+        _axpy(acc[5, lo:hi], 1.0, hxs[slot, lo:hi])
+        _axpy(acc[6, lo:hi], y * y, hs[slot, lo:hi])
+        _axpy(acc[7, lo:hi], y, hs[slot, lo:hi])
+        _axpy(acc[8, lo:hi], 1.0, hs[slot, lo:hi])
+    _fals_solve_row((v - cy) / fy, acc[:, lo:hi], xs[lo:hi], bx[lo:hi], by[lo:hi], bz[lo:hi],
+                    flag[lo:hi])
+
+
+@nb.njit(cache=True, error_model=_NUMPY, inline="always")
+def _fals_solve_row(yq, acc, xs, bx, by, bz, flag):
+    a0 = acc[0]
+    a1 = acc[1]
+    a2 = acc[2]
+    a3 = acc[3]
+    a4 = acc[4]
+    a5 = acc[5]
+    a6 = acc[6]
+    a7 = acc[7]
+    a8 = acc[8]
+    for k in range(xs.size):
+        s0 = a0[k]
+        s1 = a1[k]
+        s2 = a2[k]
+        m00 = a3[k]
+        m01 = a4[k]
+        m02 = a5[k]
+        m11 = a6[k]
+        m12 = a7[k]
+        m22 = a8[k]
+        c00 = m11 * m22 - m12 * m12
+        c01 = m02 * m12 - m01 * m22
+        c02 = m01 * m12 - m02 * m11
+        c11 = m00 * m22 - m02 * m02
+        c12 = m01 * m02 - m00 * m12
+        c22 = m00 * m11 - m01 * m01
+        nx = c00 * s0 + c01 * s1 + c02 * s2
+        ny = c01 * s0 + c11 * s1 + c12 * s2
+        nz = c02 * s0 + c12 * s1 + c22 * s2
+        nrm = math.sqrt(nx * nx + ny * ny + nz * nz)
+        inv = 1.0 / nrm
+        dot = nx * xs[k] + ny * yq + nz  # dot(n, X) / z
+        inv = -inv if dot > 0.0 else inv
+        bx[k] = nx * inv
+        by[k] = ny * inv
+        bz[k] = nz * inv
+        flag[k] = not (nrm > 0.0 and nrm < np.inf)
+
+
+@nb.njit(cache=True, nogil=True, error_model=_NUMPY)
+def _fals_rows(v0, v1, z, fx, fy, cx, cy, r, out):
     h, w = z.shape
-    for v in nb.prange(h):
-        lo = max(v - r, 0)
-        hi = min(v + r + 1, h)
-        full = (hi - lo) * 1.0
+    n = 2 * r + 1
+    xs = np.empty(w)
+    for c in range(w):
+        xs[c] = (c - cx) / fx
+    hk = np.empty((n, w))
+    hxk = np.empty((n, w))
+    hs = np.empty((n, w))
+    hxs = np.empty((n, w))
+    hxxs = np.empty((n, w))
+    krow = np.empty(w)
+    srow = np.empty(w)
+    acc = np.empty((9, w))
+    bx = np.empty(w)
+    by = np.empty(w)
+    bz = np.empty(w)
+    flag = np.empty(w, dtype=np.bool_)
+    nxt = -1  # first row of the ring not yet summed
+    for v in range(v0, v1):
+        flag[:] = True
+        if r <= v < h - r and w > 2 * r:
+            for rr in range(max(nxt, v - r), v + r + 1):
+                _fals_hrow(z, rr, xs, cy, fy, r, rr % n, hk, hxk, hs, hxs, hxxs, krow, srow)
+            nxt = v + r + 1
+            _fals_vrow(v, cy, fy, r, hk, hxk, hs, hxs, hxxs, xs, acc, bx, by, bz, flag)
+            for u in range(r, w - r):
+                out[v, u, 0] = bx[u]
+                out[v, u, 1] = by[u]
+                out[v, u, 2] = bz[u]
         for u in range(w):
-            zq = z[v, u]
-            if not (zq == zq):
-                continue
-            s0 = s1 = s2 = sc = 0.0
-            for rr in range(lo, hi):
-                s0 += hb[rr, u, 0]
-                s1 += hb[rr, u, 1]
-                s2 += hb[rr, u, 2]
-                sc += hb[rr, u, 3]
-            xq = (u - cx) * zq / fx
-            yq = (v - cy) * zq / fy
-            ncols = min(u + r + 1, w) - max(u - r, 0)
-            if sc == full * ncols:  # every pixel of the window valid: cached M^-1
-                m = minv[v, u]
-                nx = m[0] * s0 + m[1] * s1 + m[2] * s2
-                ny = m[1] * s0 + m[3] * s1 + m[4] * s2
-                nz = m[2] * s0 + m[4] * s1 + m[5] * s2
-                store_normal(out, v, u, nx, ny, nz, xq, yq, zq)
-                continue
-            # incomplete window: M over the valid pixels only, and a collinearity check
-            m00 = m01 = m02 = m11 = m12 = m22 = 0.0
-            n = 0
-            su = sv = suu = suv = svv = 0.0
-            for rr in range(lo, hi):
-                y = (rr - cy) / fy
-                for cc in range(max(u - r, 0), min(u + r + 1, w)):
-                    if not (z[rr, cc] == z[rr, cc]):
-                        continue
-                    x = (cc - cx) / fx
-                    s = 1.0 / (x * x + y * y + 1.0)
-                    m00 += x * x * s
-                    m01 += x * y * s
-                    m02 += x * s
-                    m11 += y * y * s
-                    m12 += y * s
-                    m22 += s
-                    du = cc - u
-                    dv = rr - v
-                    n += 1
-                    su += du
-                    sv += dv
-                    suu += du * du
-                    suv += du * dv
-                    svv += dv * dv
-            # pixel positions collinear <=> rays coplanar with the centre <=> M singular
-            if n < 3 or (n * suu - su * su) * (n * svv - sv * sv) - (n * suv - su * sv) ** 2 <= 0:
-                continue
-            c00 = m11 * m22 - m12 * m12
-            c01 = m02 * m12 - m01 * m22
-            c02 = m01 * m12 - m02 * m11
-            c11 = m00 * m22 - m02 * m02
-            c12 = m01 * m02 - m00 * m12
-            c22 = m00 * m11 - m01 * m01
-            nx = c00 * s0 + c01 * s1 + c02 * s2  # adj(M) b: det(M) > 0 only scales
-            ny = c01 * s0 + c11 * s1 + c12 * s2
-            nz = c02 * s0 + c12 * s1 + c22 * s2
-            store_normal(out, v, u, nx, ny, nz, xq, yq, zq)
+            if flag[u]:
+                _fals_pixel(z, v, u, fx, fy, cx, cy, r, out)
 
 
 @register("fals")
@@ -167,8 +239,8 @@ def fals(depth: Any, K: Any, *, window: int = 5, depth_scale: float | None = Non
 
     A plane ``n . p = d`` seen along the unit ray ``v`` at range ``r`` satisfies
     ``n . v / d = 1 / r``. Least squares over the window gives ``n ~ M^-1 b`` with
-    ``M = sum v v^T`` (depth-independent, cached per camera and image size) and
-    ``b = sum v / r``.
+    ``M = sum v v^T`` and ``b = sum v / r``, both as separable box sums (solved by the
+    adjugate of ``M``: its determinant only scales ``n``).
 
     Parameters
     ----------
@@ -213,58 +285,156 @@ def fals(depth: Any, K: Any, *, window: int = 5, depth_scale: float | None = Non
     """
     r = check_window(window) // 2
     z, cam = prepare(depth, K, depth_scale)
-    h, w = z.shape
-    minv = _fals_cache(h, w, cam.fx, cam.fy, cam.cx, cam.cy, r)
-    hb = np.empty((h, w, 4))
-    _fals_rows(z, cam.fx, cam.fy, cam.cx, cam.cy, r, hb)
-    out = new_output(z.shape)
-    _fals_solve(z, cam.fx, cam.fy, cam.cx, cam.cy, r, hb, minv, out)
+    out = np.empty((*z.shape, 3), dtype=np.float32)
+    run_rows(_fals_rows, z.shape[0], z, cam.fx, cam.fy, cam.cx, cam.cy, r, out)
     return out
 
 
 # ------------------------------------------------------------------------------------ SRI
 
-@nb.njit(cache=True, parallel=True)
-def _sri_kernel(z, fx, fy, cx, cy, deriv, smooth, out):
-    h, w = z.shape
-    # range image r(u, v) = z sqrt(x'^2 + y'^2 + 1)
-    R = np.empty((h, w))
-    for v in nb.prange(h):
+@nb.njit(cache=True, nogil=True, error_model=_NUMPY)
+def _range_rows(v0, v1, z, fx, fy, cx, cy, R):
+    """Range image r(u, v) = z sqrt(x'^2 + y'^2 + 1) (NaN at invalid depth)."""
+    w = z.shape[1]
+    for v in range(v0, v1):
         y = (v - cy) / fy
         for u in range(w):
             x = (u - cx) / fx
             R[v, u] = z[v, u] * math.sqrt(x * x + y * y + 1.0)
-    for v in nb.prange(h):
-        y = (v - cy) / fy
+
+
+@nb.njit(cache=True, error_model=_NUMPY, inline="always")
+def _sri_normal(ru, rv, rq, x, y, fx, fy):
+    """Normal (not normalised) from the image derivatives of range at (x, y) = normalised
+    image coordinates, range rq."""
+    rho2 = x * x + y * y + 1.0
+    sx = math.sqrt(1.0 + x * x)
+    sr = math.sqrt(rho2)
+    # azimuth theta = atan(x), elevation phi = asin(y / sqrt(rho2))
+    ct = 1.0 / sx
+    st = x * ct
+    sp = y / sr
+    cp = sx / sr
+    # Jacobian of (theta, phi) w.r.t. (u, v): theta_v = 0
+    th_u = 1.0 / (fx * (1.0 + x * x))
+    ph_u = -x * y / (fx * rho2 * sx)
+    ph_v = sx / (fy * rho2)
+    r_phi = rv / ph_v
+    r_theta = (ru - r_phi * ph_u) / th_u
+    a = r_theta / (rq * cp)
+    b = r_phi / rq
+    # n ~ s - a e_theta - b e_phi (spherical frame: s radial)
+    return st * cp - a * ct + b * st * sp, sp - b * cp, ct * cp + a * st + b * ct * sp
+
+
+@nb.njit(cache=True, error_model=_NUMPY)
+def _sri_pixel(z, R, v, u, fx, fy, cx, cy, deriv, smooth, out):
+    """SRI at one pixel with the validity-aware stencil (fallbacks next to invalid pixels)."""
+    zq = z[v, u]
+    out[v, u, 0] = np.nan
+    out[v, u, 1] = np.nan
+    out[v, u, 2] = np.nan
+    if not (zq == zq):
+        return
+    ru = stencil_derivative(R, v, u, 0, 1, deriv, smooth)
+    rv = stencil_derivative(R, v, u, 1, 0, deriv, smooth)
+    if not (ru == ru and rv == rv):
+        return
+    x = (u - cx) / fx
+    y = (v - cy) / fy
+    nx, ny, nz = _sri_normal(ru, rv, R[v, u], x, y, fx, fy)
+    store_normal(out, v, u, nx, ny, nz, x * zq, y * zq, zq)
+
+
+@nb.njit(cache=True, error_model=_NUMPY)
+def _sri_hrow(R, rr, deriv, md, slot, hd):
+    """Horizontal derivative taps of row rr of R into ring slot ``slot`` (columns md..w-md-1)."""
+    w = R.shape[1]
+    for u in range(md, w - md):
+        hd[slot, u] = 0.0
+    for i in range(-md, md + 1):
+        d = deriv[i + md]
+        if d == 0.0:
+            continue
+        for u in range(md, w - md):
+            hd[slot, u] += d * R[rr, u + i]
+
+
+@nb.njit(cache=True, nogil=True, error_model=_NUMPY)
+def _sri_rows(v0, v1, z, R, fx, fy, cx, cy, deriv, smooth, out):
+    """Separable Sobel stencil on fully valid windows (a vectorisable row pass), the
+    validity-aware per-pixel stencil elsewhere (flagged pixels)."""
+    h, w = z.shape
+    m = deriv.size // 2
+    n = 2 * m + 1
+    wsum = 0.0
+    for j in range(n):
+        if smooth[j] != 0.0:
+            wsum += smooth[j]
+    iws = 1.0 / wsum
+    hd = np.empty((n, w))
+    vd = np.empty(w)
+    ru = np.empty(w)
+    rv = np.empty(w)
+    bx = np.empty(w)
+    by = np.empty(w)
+    bz = np.empty(w)
+    flag = np.empty(w, dtype=np.bool_)
+    nxt = -1
+    for v in range(v0, v1):
+        flag[:] = True
+        if m <= v < h - m and w > 2 * m:
+            for rr in range(max(nxt, v - m), v + m + 1):
+                _sri_hrow(R, rr, deriv, m, rr % n, hd)
+            nxt = v + m + 1
+            # d/du: smoothing across (along v) of the per-row derivatives
+            for u in range(m, w - m):
+                ru[u] = 0.0
+            for j in range(n):
+                s = smooth[j]
+                if s == 0.0:
+                    continue
+                slot = (v - m + j) % n
+                for u in range(m, w - m):
+                    ru[u] += s * hd[slot, u]
+            # d/dv: derivative along v per column, then smoothing across (along u)
+            for u in range(w):
+                vd[u] = 0.0
+            for i in range(n):
+                d = deriv[i]
+                if d == 0.0:
+                    continue
+                rr = v - m + i
+                for u in range(w):
+                    vd[u] += d * R[rr, u]
+            for u in range(m, w - m):
+                rv[u] = 0.0
+            for j in range(n):
+                s = smooth[j]
+                if s == 0.0:
+                    continue
+                for u in range(m, w - m):
+                    rv[u] += s * vd[u - m + j]
+            y = (v - cy) / fy
+            for u in range(m, w - m):
+                x = (u - cx) / fx
+                rq = R[v, u]
+                nx, ny, nz = _sri_normal(ru[u] * iws, rv[u] * iws, rq, x, y, fx, fy)
+                nrm = math.sqrt(nx * nx + ny * ny + nz * nz)
+                inv = 1.0 / nrm
+                inv = -inv if nx * x + ny * y + nz > 0.0 else inv
+                bx[u] = nx * inv
+                by[u] = ny * inv
+                bz[u] = nz * inv
+                chk = nrm * rq * 0.0 + nrm
+                flag[u] = not (chk == chk and nrm > 0.0 and nrm < np.inf)
+            for u in range(m, w - m):
+                out[v, u, 0] = bx[u]
+                out[v, u, 1] = by[u]
+                out[v, u, 2] = bz[u]
         for u in range(w):
-            zq = z[v, u]
-            if not (zq == zq):
-                continue
-            ru = stencil_derivative(R, v, u, 0, 1, deriv, smooth)
-            rv = stencil_derivative(R, v, u, 1, 0, deriv, smooth)
-            if not (ru == ru and rv == rv):
-                continue
-            x = (u - cx) / fx
-            rho2 = x * x + y * y + 1.0
-            # azimuth theta = atan(x), elevation phi = asin(y / sqrt(rho2))
-            ct = 1.0 / math.sqrt(1.0 + x * x)
-            st = x * ct
-            sp = y / math.sqrt(rho2)
-            cp = math.sqrt(1.0 + x * x) / math.sqrt(rho2)
-            # Jacobian of (theta, phi) w.r.t. (u, v): theta_v = 0
-            th_u = 1.0 / (fx * (1.0 + x * x))
-            ph_u = -x * y / (fx * rho2 * math.sqrt(1.0 + x * x))
-            ph_v = math.sqrt(1.0 + x * x) / (fy * rho2)
-            r_phi = rv / ph_v
-            r_theta = (ru - r_phi * ph_u) / th_u
-            rq = R[v, u]
-            a = r_theta / (rq * cp)
-            b = r_phi / rq
-            # n ~ s - a e_theta - b e_phi (spherical frame: s radial)
-            nx = st * cp - a * ct + b * st * sp
-            ny = sp - b * cp
-            nz = ct * cp + a * st + b * ct * sp
-            store_normal(out, v, u, nx, ny, nz, x * zq, y * zq, zq)
+            if flag[u]:
+                _sri_pixel(z, R, v, u, fx, fy, cx, cy, deriv, smooth, out)
 
 
 @register("sri")
@@ -321,17 +491,20 @@ def sri(depth: Any, K: Any, *, window: int = 5, depth_scale: float | None = None
         raise ValueError(f"window must be one of 3, 5, 7, 9, 11 for sri; got {window}")
     z, cam = prepare(depth, K, depth_scale)
     deriv, smooth = gradient_kernels("sobel", window)
-    out = new_output(z.shape)
-    _sri_kernel(z, cam.fx, cam.fy, cam.cx, cam.cy, deriv, smooth, out)
+    h = z.shape[0]
+    R = np.empty(z.shape)
+    run_rows(_range_rows, h, z, cam.fx, cam.fy, cam.cx, cam.cy, R)
+    out = np.empty((*z.shape, 3), dtype=np.float32)
+    run_rows(_sri_rows, h, z, R, cam.fx, cam.fy, cam.cx, cam.cy, deriv, smooth, out)
     return out
 
 
 # ------------------------------------------------------------------------------- LINE-MOD
 
-@nb.njit(cache=True, parallel=True)
-def _linemod_kernel(z, fx, fy, cx, cy, r, thr, out):
+@nb.njit(cache=True, nogil=True, error_model=_NUMPY)
+def _linemod_rows(v0, v1, z, fx, fy, cx, cy, r, thr, out):
     h, w = z.shape
-    for v in nb.prange(h):
+    for v in range(v0, v1):
         for u in range(w):
             zq = z[v, u]
             if not (zq == zq):
@@ -431,5 +604,5 @@ def line_mod(depth: Any, K: Any, *, window: int = 11, threshold: float = 0.05,
     thr = check_positive(threshold, "threshold")
     z, cam = prepare(depth, K, depth_scale)
     out = new_output(z.shape)
-    _linemod_kernel(z, cam.fx, cam.fy, cam.cx, cam.cy, r, thr, out)
+    run_rows(_linemod_rows, z.shape[0], z, cam.fx, cam.fy, cam.cx, cam.cy, r, thr, out)
     return out

@@ -8,6 +8,7 @@ from typing import Any
 import numba as nb
 import numpy as np
 
+from .._parallel import run_rows
 from ..registry import register
 from ._common import new_output, prepare, store_normal
 from ._stencils import gradient_kernels, stencil_derivative
@@ -18,11 +19,10 @@ _NB = np.array([[-1, -1], [-1, 0], [-1, 1], [0, -1], [0, 1], [1, -1], [1, 0], [1
                dtype=np.int64)
 
 
-@nb.njit(cache=True, parallel=True)
-def _roadseg_kernel(z, fx, fy, cx, cy, deriv, smooth, nb_off, out):
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _roadseg_rows(v0, v1, z, D, fx, fy, cx, cy, deriv, smooth, nb_off, out):
     h, w = z.shape
-    D = 1.0 / z
-    for v in nb.prange(h):
+    for v in range(v0, v1):
         for u in range(w):
             zq = z[v, u]
             if not (zq == zq):
@@ -124,5 +124,7 @@ def sne_roadseg(depth: Any, K: Any, *, depth_scale: float | None = None) -> np.n
     z, cam = prepare(depth, K, depth_scale)
     deriv, smooth = gradient_kernels("fd", 3)
     out = new_output(z.shape)
-    _roadseg_kernel(z, cam.fx, cam.fy, cam.cx, cam.cy, deriv, smooth, _NB, out)
+    D = np.divide(1.0, z, dtype=np.float64)
+    run_rows(_roadseg_rows, z.shape[0], z, D, cam.fx, cam.fy, cam.cx, cam.cy, deriv, smooth, _NB,
+             out)
     return out

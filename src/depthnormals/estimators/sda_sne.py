@@ -9,6 +9,7 @@ from typing import Any
 import numba as nb
 import numpy as np
 
+from .._parallel import run_rows
 from ..registry import register
 from ._common import new_output, prepare, store_normal
 
@@ -20,22 +21,14 @@ _INF = np.inf
 _P = 2  # padding of the working arrays: every neighbour read stays in bounds
 
 
-@nb.njit(cache=True, parallel=True)
-def _setup(z):
-    """Padded working arrays: depth (NaN pad), signed 1-D Laplacians ``2 z - z(-1) - z(+1)``
-    along u and v (NaN where undefined) and their magnitudes (inf where undefined)."""
-    h, w = z.shape
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _laplacian_rows(v0, v1, zp, lu, lv, mu, mv):
+    """Signed 1-D Laplacians ``2 z - z(-1) - z(+1)`` along u and v of the padded depth (NaN
+    where undefined) and their magnitudes (inf where undefined), rows ``P + [v0, v1)``."""
+    W = zp.shape[1]
     P = _P
-    zp = np.full((h + 2 * P, w + 2 * P), np.nan)
-    for v in nb.prange(h):
-        for u in range(w):
-            zp[v + P, u + P] = z[v, u]
-    lu = np.full(zp.shape, np.nan)
-    lv = np.full(zp.shape, np.nan)
-    mu = np.full(zp.shape, _INF)
-    mv = np.full(zp.shape, _INF)
-    for v in nb.prange(P, h + P):
-        for u in range(P, w + P):
+    for v in range(v0 + P, v1 + P):
+        for u in range(P, W - P):
             zc = zp[v, u]
             a = 2.0 * zc - zp[v, u - 1] - zp[v, u + 1]
             b = 2.0 * zc - zp[v - 1, u] - zp[v + 1, u]
@@ -45,19 +38,32 @@ def _setup(z):
                 mu[v, u] = abs(a)
             if b == b:
                 mv[v, u] = abs(b)
+
+
+def _setup(z):
+    """Padded working arrays: depth (NaN pad), Laplacians and their magnitudes."""
+    h, w = z.shape
+    P = _P
+    zp = np.full((h + 2 * P, w + 2 * P), np.nan)
+    zp[P:P + h, P:P + w] = z
+    lu = np.full(zp.shape, np.nan)
+    lv = np.full(zp.shape, np.nan)
+    mu = np.full(zp.shape, _INF)
+    mv = np.full(zp.shape, _INF)
+    run_rows(_laplacian_rows, h, zp, lu, lv, mu, mv)
     return zp, lu, lv, mu, mv
 
 
-@nb.njit(cache=True, parallel=True)
-def _init(zp, mu, mv, Gu, Gv, Eu, Ev, Su, Sv):
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _init(v0, v1, zp, mu, mv, Gu, Gv, Eu, Ev, Su, Sv):
     """Initial gradients: per direction the central, forward or backward difference whose
     |Laplacian| (at the pixel, the forward or the backward neighbour) is least.
 
     State: 2 central, 1 forward, 0 backward (-1 none). First minimum wins; with no finite
     energy, the first available difference with infinite energy.
     """
-    H, W = zp.shape
-    for v in nb.prange(_P, H - _P):
+    W = zp.shape[1]
+    for v in range(v0 + _P, v1 + _P):
         for u in range(_P, W - _P):
             zc = zp[v, u]
             if not (zc == zc):
@@ -115,25 +121,26 @@ def _init(zp, mu, mv, Gu, Gv, Eu, Ev, Su, Sv):
                     Sv[v, u] = best
 
 
-@nb.njit(cache=True, parallel=True)
-def _across_costs(mu, mv, Eu, Ev, Cu, Cv):
-    """Cost of reaching a pixel from across: ``Cu = |L_v| + E_u``, ``Cv = |L_u| + E_v``."""
-    H, W = mu.shape
-    for v in nb.prange(H):
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _across_costs(v0, v1, mu, mv, Eu, Ev, Cu, Cv):
+    """Cost of reaching a pixel from across: ``Cu = |L_v| + E_u``, ``Cv = |L_u| + E_v``
+    (padded rows ``[v0, v1)``)."""
+    W = mu.shape[1]
+    for v in range(v0, v1):
         for u in range(W):
             Cu[v, u] = mv[v, u] + Eu[v, u]
             Cv[v, u] = mu[v, u] + Ev[v, u]
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def _pick(best_g, best_e, best_s, g, e, s):
     if g == g and e < best_e:
         return g, e, s
     return best_g, best_e, best_s
 
 
-@nb.njit(cache=True, parallel=True)
-def _iterate(zp, lu, lv, mu, mv, Gu, Gv, Eu, Ev, Su, Sv, Cu, Cv, step,
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _iterate(v0, v1, zp, lu, lv, mu, mv, Gu, Gv, Eu, Ev, Su, Sv, Cu, Cv, step,
              nGu, nGv, nEu, nEv, nSu, nSv, moved):
     """One synchronous round of the nine transitions, for both directions.
 
@@ -142,8 +149,8 @@ def _iterate(zp, lu, lv, mu, mv, Gu, Gv, Eu, Ev, Su, Sv, Cu, Cv, step,
     neighbour across, 5..8 the diagonals (back-back, back-fwd, fwd-back, fwd-fwd: across
     first, then along) with a mixed-derivative correction.
     """
-    H, W = zp.shape
-    for v in nb.prange(_P, H - _P):
+    W = zp.shape[1]
+    for v in range(v0 + _P, v1 + _P):
         m = 0
         for u in range(_P, W - _P):
             zc = zp[v, u]
@@ -218,10 +225,10 @@ def _iterate(zp, lu, lv, mu, mv, Gu, Gv, Eu, Ev, Su, Sv, Cu, Cv, step,
         moved[v] = m
 
 
-@nb.njit(cache=True, parallel=True)
-def _formula(z, Gu, Gv, fx, fy, cx, cy, out):
-    h, w = z.shape
-    for v in nb.prange(h):
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _formula(v0, v1, z, Gu, Gv, fx, fy, cx, cy, out):
+    w = z.shape[1]
+    for v in range(v0, v1):
         for u in range(w):
             zq = z[v, u]
             gu = Gu[v, u]
@@ -244,15 +251,15 @@ def sda_gradients(z: np.ndarray, iterations: int) -> tuple[np.ndarray, np.ndarra
     Gu, Gv = np.full(shape, np.nan), np.full(shape, np.nan)
     Eu, Ev = np.full(shape, _INF), np.full(shape, _INF)
     Su, Sv = np.full(shape, -1, np.int8), np.full(shape, -1, np.int8)
-    _init(zp, mu, mv, Gu, Gv, Eu, Ev, Su, Sv)
+    run_rows(_init, h, zp, mu, mv, Gu, Gv, Eu, Ev, Su, Sv)
     nxt = [a.copy() for a in (Gu, Gv, Eu, Ev, Su, Sv)]
     Cu, Cv = np.empty(shape), np.empty(shape)
     moved = np.zeros(shape[0], np.int64)
     done = 0
     for it in range(1, iterations + 1):
-        _across_costs(mu, mv, Eu, Ev, Cu, Cv)
-        _iterate(zp, lu, lv, mu, mv, Gu, Gv, Eu, Ev, Su, Sv, Cu, Cv, 1.0 / (it + 1.0),
-                 *nxt, moved)
+        run_rows(_across_costs, shape[0], mu, mv, Eu, Ev, Cu, Cv)
+        run_rows(_iterate, h, zp, lu, lv, mu, mv, Gu, Gv, Eu, Ev, Su, Sv, Cu, Cv,
+                 1.0 / (it + 1.0), *nxt, moved)
         if not moved.any():
             break
         done = it
@@ -337,6 +344,6 @@ def sda_sne(depth: Any, K: Any, *, iterations: int = 3,
     z, cam = prepare(depth, K, depth_scale)
     Gu, Gv, _ = sda_gradients(z, int(iterations))
     out = new_output(z.shape)
-    _formula(np.ascontiguousarray(z, dtype=np.float64), Gu, Gv, cam.fx, cam.fy, cam.cx, cam.cy,
-             out)
+    run_rows(_formula, z.shape[0], np.ascontiguousarray(z, dtype=np.float64), Gu, Gv, cam.fx,
+             cam.fy, cam.cx, cam.cy, out)
     return out
