@@ -26,11 +26,12 @@ def setup_faces(vc, faces, fx, fy, cx, cy, width, height, near):  # pragma: no c
     >= 0 inside) and its float bounding box (umin, umax, vmin, vmax). ``nvert`` (the polygon's
     vertex count) is 0 for faces not drawn."""
     nf = faces.shape[0]
-    normal = np.zeros((nf, 3))
-    offset = np.zeros(nf)
-    edges = np.zeros((nf, 4, 3))
+    # only rows of faces with nvert > 0 are ever read: no need to clear the others
+    normal = np.empty((nf, 3))
+    offset = np.empty(nf)
+    edges = np.empty((nf, 4, 3))
     nvert = np.zeros(nf, dtype=np.int32)
-    fbox = np.zeros((nf, 4))
+    fbox = np.empty((nf, 4))
     poly = np.empty((nf, 4, 2))  # scratch: clipped, projected polygon
     for f in nb.prange(nf):
         i0 = faces[f, 0]
@@ -40,6 +41,22 @@ def setup_faces(vc, faces, fx, fy, cx, cy, width, height, near):  # pragma: no c
         z1 = vc[i1, 2]
         z2 = vc[i2, 2]
         if z0 < near and z1 < near and z2 < near:
+            continue
+        # frustum side planes through the camera centre (one pixel of margin): a triangle
+        # with all three vertices outside one of these half-spaces cannot be seen
+        x0 = fx * vc[i0, 0]
+        x1 = fx * vc[i1, 0]
+        x2 = fx * vc[i2, 0]
+        if x0 + (cx + 1.0) * z0 < 0.0 and x1 + (cx + 1.0) * z1 < 0.0 and x2 + (cx + 1.0) * z2 < 0.0:
+            continue
+        if x0 + (cx - width) * z0 > 0.0 and x1 + (cx - width) * z1 > 0.0 and x2 + (cx - width) * z2 > 0.0:
+            continue
+        y0 = fy * vc[i0, 1]
+        y1 = fy * vc[i1, 1]
+        y2 = fy * vc[i2, 1]
+        if y0 + (cy + 1.0) * z0 < 0.0 and y1 + (cy + 1.0) * z1 < 0.0 and y2 + (cy + 1.0) * z2 < 0.0:
+            continue
+        if y0 + (cy - height) * z0 > 0.0 and y1 + (cy - height) * z1 > 0.0 and y2 + (cy - height) * z2 > 0.0:
             continue
         # plane first (cheap) and the edge-on test
         ax = vc[i1, 0] - vc[i0, 0]
@@ -107,6 +124,9 @@ def setup_faces(vc, faces, fx, fy, cx, cy, width, height, near):  # pragma: no c
             ey = pv[k1] - pv[k]
             le = np.sqrt(ex * ex + ey * ey)
             if le == 0.0:  # repeated vertex after clipping: no constraint
+                edges[f, k, 0] = 0.0
+                edges[f, k, 1] = 0.0
+                edges[f, k, 2] = 0.0
                 continue
             edges[f, k, 0] = -sgn * ey / le
             edges[f, k, 1] = sgn * ex / le
