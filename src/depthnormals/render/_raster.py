@@ -1,10 +1,12 @@
 """Compiled kernels of the z-buffer renderer (numba, cached).
 
 Each triangle is clipped against the near plane ``z = near`` (Sutherland-Hodgman, giving a
-convex polygon of at most four vertices), projected, and binned into square screen tiles.
-Tiles are rasterised in parallel; inside a tile faces are visited in index order, so the
-result does not depend on the thread count. A pixel is covered when its integer position
-lies inside the projected polygon (edges inclusive, with a 1e-9 pixel tolerance so shared
+convex polygon of at most four vertices), projected, and binned into square screen tiles
+(each tile's z-buffer stays in cache); inside a tile faces are visited in index order.
+Single-threaded on purpose: on the 2-core target machine, shared with other work, numba's
+parallel threads were 2-4x slower than one thread (docs/_bench_synth.md).
+
+A pixel is covered when its integer position lies inside the projected polygon (edges inclusive, with a 1e-9 pixel tolerance so shared
 edges never leave cracks); its depth is the exact intersection of its ray with the plane of
 the triangle, ``z = c / (n . r)`` with ``r = ((u - cx) / fx, (v - cy) / fy, 1)``. On equal
 depth the lower face index wins.
@@ -19,7 +21,7 @@ TILE = 32
 _EDGE_TOL = 1e-9  # pixels
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True)
 def setup_faces(vc, faces, fx, fy, cx, cy, width, height, near):  # pragma: no cover - compiled
     """Per face: camera-facing unit normal, plane offset, the edge equations of the projected
     clipped polygon (counter-clockwise; ``A u + B v + C`` is the signed distance in pixels,
@@ -33,7 +35,7 @@ def setup_faces(vc, faces, fx, fy, cx, cy, width, height, near):  # pragma: no c
     nvert = np.zeros(nf, dtype=np.int32)
     fbox = np.empty((nf, 4))
     poly = np.empty((nf, 4, 2))  # scratch: clipped, projected polygon
-    for f in nb.prange(nf):
+    for f in range(nf):
         i0 = faces[f, 0]
         i1 = faces[f, 1]
         i2 = faces[f, 2]
@@ -193,7 +195,7 @@ def bin_faces(nvert, bbox, tiles_u, tiles_v):  # pragma: no cover - compiled
     return count, items
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True)
 def raster_tiles(normal, offset, edges, nvert, bbox, start, items, tiles_u, tiles_v,
                  fx, fy, cx, cy, width, height, near, far, offsets, mask):  # pragma: no cover
     """Z-buffer every tile at the sample positions ``(u, v) + offsets[s]`` of the pixels where
@@ -203,7 +205,7 @@ def raster_tiles(normal, offset, edges, nvert, bbox, start, items, tiles_u, tile
     depth = np.zeros((height, width, ns))
     face = np.full((height, width, ns), -1, dtype=np.int32)
     ntiles = tiles_u * tiles_v
-    for t in nb.prange(ntiles):
+    for t in range(ntiles):
         tu = t % tiles_u
         tv = t // tiles_u
         tu0 = tu * TILE
@@ -245,7 +247,7 @@ def raster_tiles(normal, offset, edges, nvert, bbox, start, items, tiles_u, tile
                         if old == 0.0 or z < old:
                             depth[v, u, s] = z
                             face[v, u, s] = f
-    for v in nb.prange(height):
+    for v in range(height):
         for u in range(width):
             if not mask[v, u]:
                 for s in range(ns):
@@ -253,12 +255,12 @@ def raster_tiles(normal, offset, edges, nvert, bbox, start, items, tiles_u, tile
     return depth, face
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True)
 def gather_normals(face, normal):  # pragma: no cover - compiled
     """(H, W, 3) normals of the faces in ``face`` (H, W); NaN where ``face`` < 0."""
     h, w = face.shape
     out = np.empty((h, w, 3))
-    for v in nb.prange(h):
+    for v in range(h):
         for u in range(w):
             f = face[v, u]
             for j in range(3):
