@@ -8,8 +8,8 @@ parallel threads were 2-4x slower than one thread (docs/_bench_synth.md).
 
 A pixel is covered when its integer position lies inside the projected polygon (edges
 inclusive, with a 1e-9 pixel tolerance so shared edges never leave cracks); its depth is
-the exact intersection of its ray with the plane of the triangle, ``z = c / (n . r)`` with ``r = ((u - cx) / fx, (v - cy) / fy, 1)``. On equal
-depth the lower face index wins.
+the exact intersection of its ray with the plane of the triangle, ``z = c / (n . r)`` with
+``r = ((u - cx) / fx, (v - cy) / fy, 1)``. On equal depth the lower face index wins.
 """
 
 from __future__ import annotations
