@@ -18,6 +18,14 @@ from depthnormals.analytic import Plane, Scene, Sphere, sphere_before_wall, tilt
 METHODS = dn.methods()
 # estimators whose accuracy on planes the issue specifies; others get sign/orientation checks
 EXACT = {"3f2n": 1e-3, "d2nt": 1e-2}
+# SRI differentiates range on the image grid: not exact on planes, its error grows with the
+# angle a pixel spans (1.6 deg at fx = 4 below, ~0.001 deg at fx = 525; docs/estimators.md).
+# Component tolerances for it, else 1e-6.
+APPROX = {"sri": 0.03}
+
+
+def comp_tol(method):
+    return APPROX.get(method.rstrip("+"), 1e-6)
 
 
 def plane_depth(normal, offset, K, shape):
@@ -113,7 +121,7 @@ def test_fronto_parallel_wall_is_minus_z(method):
     inner = interior((13, 15), 3)
     assert np.isfinite(n[inner]).all()
     ok = np.isfinite(n).all(axis=-1)
-    np.testing.assert_allclose(n[ok], np.broadcast_to([0, 0, -1], n[ok].shape), atol=1e-6)
+    np.testing.assert_allclose(n[ok], np.broadcast_to([0, 0, -1], n[ok].shape), atol=comp_tol(method))
     # the wrong reading: the corner ray is far from the optical axis
     ray = np.array([(0 - 7.0) / 4.0, (0 - 6.0) / 4.0, 1.0])
     assert angle_deg(ray, [0, 0, 1]) > 60
@@ -165,7 +173,7 @@ def test_tilt_in_u_only_never_produces_ny(method):
     n = dn.estimate_normals(z, K, method=method)
     ok = np.isfinite(n).all(axis=-1)
     assert ok[interior(z.shape, 3)].all()
-    assert np.abs(n[ok][:, 1]).max() < 1e-6
+    assert np.abs(n[ok][:, 1]).max() < comp_tol(method)
     assert (n[interior(z.shape, 3)][:, 0] > 0.5).all()
 
 
