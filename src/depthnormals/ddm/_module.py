@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from .._validate import check_choice, check_normals
-from ..estimators._common import new_output, prepare
+from ..estimators._common import prepare
 from .correlation import CORRELATIONS, kendall_map
 from .crf import CROSS, SQUARE, crf_step, select_min
 from .curvature import CURVATURES, DERIVATIVES, FOOTPRINTS, SLOPES, curvature_map
@@ -17,6 +17,10 @@ __all__ = ["NEIGHBOURHOODS", "discontinuity_discrimination"]
 
 NEIGHBOURHOODS = ("square", "cross")
 _CURV = (*CURVATURES, "none")
+
+
+def _empty(shape: tuple[int, ...]) -> np.ndarray:
+    return np.empty((shape[0], shape[1], 3), dtype=np.float32)  # the kernels write every pixel
 
 
 def _check_real(value: Any, name: str, *, minimum: float = 0.0) -> float:
@@ -165,7 +169,7 @@ def discontinuity_discrimination(
         k = np.zeros(z.shape)
     else:
         k = curvature_map(z, fx, fy, cx, cy, curvature, derivatives, slope, footprint)
-    n0 = new_output(z.shape)
+    n0 = _empty(z.shape)
     select_min(z, n_in, k, offs, fx, fy, cx, cy, n0)
 
     tau = np.zeros((1, 1))
@@ -175,7 +179,7 @@ def discontinuity_discrimination(
         if correlation in ("kendall", "kendall-prose"):
             key = tau if correlation == "kendall" else -tau
             key = np.where(np.isnan(key), np.inf, key)
-            out = new_output(z.shape)
+            out = _empty(z.shape)
             select_min(z, n0, key, offs, fx, fy, cx, cy, out)
             return out
         return n0
@@ -185,7 +189,7 @@ def discontinuity_discrimination(
     kq = k * z if curvature in ("mean", "max") else k
     cur = n0
     for _ in range(int(iterations)):
-        out = new_output(z.shape)
+        out = _empty(z.shape)
         crf_step(z, cur, n0, kq, mode, tau, sigma, lam, offs, fx, fy, cx, cy, out)
         cur = out
     return cur

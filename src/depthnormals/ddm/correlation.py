@@ -27,45 +27,74 @@ import math
 import numba as nb
 import numpy as np
 
+from .._parallel import run_rows
+
 __all__ = ["CORRELATIONS", "kendall_map"]
 
 CORRELATIONS = ("kendall", "kendall-prose", "pearson", "none")
 
 
-@nb.njit(cache=True, parallel=True)
-def kendall_map(z):
-    """Kendall's tau of the paper at every pixel (NaN where the pixel is invalid)."""
+@nb.njit(cache=True, error_model="numpy")
+def _sign_counts(z0, a, b, c, d, e, f, g, k):
+    """(|mu_c - mu_d| / (mu_c + mu_d), 0 when all tie) of a centre and its 8 neighbours."""
+    mc = (np.float64(a > z0) + np.float64(b > z0) + np.float64(c > z0) + np.float64(d > z0)
+          + np.float64(e > z0) + np.float64(f > z0) + np.float64(g > z0) + np.float64(k > z0))
+    md = (np.float64(a < z0) + np.float64(b < z0) + np.float64(c < z0) + np.float64(d < z0)
+          + np.float64(e < z0) + np.float64(f < z0) + np.float64(g < z0) + np.float64(k < z0))
+    s = mc + md
+    t = abs(mc - md) / (s if s > 0.0 else 1.0)
+    return t if z0 == z0 else np.nan
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _smp(z, v, u):
     h, w = z.shape
-    out = np.empty((h, w))
-    for v in nb.prange(h):
+    if v < 0 or v >= h or u < 0 or u >= w:
+        return np.nan
+    return np.float64(z[v, u])
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _kendall_rows(v0, v1, z, out):
+    h, w = z.shape
+    for v in range(v0, v1):
+        if 0 < v < h - 1 and w > 2:
+            zp = z[v - 1]
+            zc = z[v]
+            zn = z[v + 1]
+            o = out[v]
+            for u in range(1, w - 1):  # branch-free interior (NaN compares false: ignored)
+                o[u] = _sign_counts(np.float64(zc[u]), np.float64(zp[u - 1]),
+                                    np.float64(zp[u]), np.float64(zp[u + 1]),
+                                    np.float64(zc[u - 1]), np.float64(zc[u + 1]),
+                                    np.float64(zn[u - 1]), np.float64(zn[u]),
+                                    np.float64(zn[u + 1]))
+            cols = (0, w - 1)
+        else:
+            cols = (-1, -1)
         for u in range(w):
-            z0 = z[v, u]
-            if not (z0 == z0):
-                out[v, u] = np.nan
+            if cols[0] >= 0 and u != cols[0] and u != cols[1]:
                 continue
-            mc = 0
-            md = 0
-            for dv in range(-1, 2):
-                r = v + dv
-                if r < 0 or r >= h:
-                    continue
-                for du in range(-1, 2):
-                    c = u + du
-                    if c < 0 or c >= w or (dv == 0 and du == 0):
-                        continue
-                    zn = z[r, c]
-                    if zn > z0:
-                        mc += 1
-                    elif zn < z0:
-                        md += 1
-            if mc + md == 0:
-                out[v, u] = 0.0
-            else:
-                out[v, u] = abs(mc - md) / (mc + md)
+            out[v, u] = _sign_counts(_smp(z, v, u), _smp(z, v - 1, u - 1), _smp(z, v - 1, u),
+                                     _smp(z, v - 1, u + 1), _smp(z, v, u - 1),
+                                     _smp(z, v, u + 1), _smp(z, v + 1, u - 1),
+                                     _smp(z, v + 1, u), _smp(z, v + 1, u + 1))
+
+
+def kendall_map(z: np.ndarray) -> np.ndarray:
+    """Kendall's tau of the paper at every pixel of depth ``z`` (NaN where z is invalid).
+
+    ``z``: float array (H, W) with NaN at invalid pixels (as prepared by the estimators).
+    """
+    z = np.ascontiguousarray(z)
+    if z.dtype.kind != "f":
+        z = z.astype(np.float64)
+    out = np.empty(z.shape)
+    run_rows(_kendall_rows, z.shape[0], z, out)
     return out
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def pearson_pair(z, v1, u1, v2, u2):
     """|Pearson correlation| between the 3x3 depth patches centred at (v1, u1) and (v2, u2)."""
     h, w = z.shape

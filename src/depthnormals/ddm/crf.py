@@ -1,6 +1,7 @@
 """Candidate selection and the CRF of 3F2N+ (sections III-A to III-C), compiled with numba.
 
-Every kernel is parallel over rows; candidates are the pixels of a neighbourhood whose depth
+Every kernel is a serial numba function over a band of rows, run on threads by
+:func:`depthnormals._parallel.run_rows`; candidates are the pixels of a neighbourhood whose depth
 is valid and whose input normal is finite, so invalid pixels never give a normal. The chosen
 normal is re-oriented toward the camera at the receiving pixel.
 """
@@ -12,6 +13,7 @@ import math
 import numba as nb
 import numpy as np
 
+from .._parallel import run_rows
 from ..estimators._common import store_normal
 from .correlation import pearson_pair
 
@@ -25,7 +27,11 @@ SQUARE = np.array([[0, 0], [-1, -1], [-1, 0], [-1, 1], [0, -1], [0, 1], [1, -1],
 _BIG = 1e6
 
 
-@nb.njit(cache=True, inline="always")
+_JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
+_INL = {"cache": True, "error_model": "numpy", "inline": "always"}
+
+
+@nb.njit(**_INL)
 def _ok(z, n, r, c):
     h, w = z.shape
     if r < 0 or r >= h or c < 0 or c >= w:
@@ -33,66 +39,171 @@ def _ok(z, n, r, c):
     return z[r, c] == z[r, c] and n[r, c, 0] == n[r, c, 0]
 
 
-@nb.njit(cache=True, parallel=True)
-def select_min(z, normals, key, offs, fx, fy, cx, cy, out):
-    """Each valid pixel takes the normal of the candidate with the least ``key`` (self first)."""
+@nb.njit(**_INL)
+def _nan3(out, v, u):
+    out[v, u, 0] = np.nan
+    out[v, u, 1] = np.nan
+    out[v, u, 2] = np.nan
+
+
+@nb.njit(**_INL)
+def _select_pixel(z, normals, key, offs, fx, fy, cx, cy, v, u, out):
+    zq = z[v, u]
+    if not (zq == zq):
+        _nan3(out, v, u)
+        return
+    found = False
+    best = 0.0
+    bv = np.int64(v)
+    bu = np.int64(u)
+    for k in range(offs.shape[0]):
+        r = v + offs[k, 0]
+        c = u + offs[k, 1]
+        if not _ok(z, normals, r, c):
+            continue
+        kk = key[r, c]
+        if not found or kk < best:
+            found = True
+            best = kk
+            bv = r
+            bu = c
+    if found:
+        store_normal(out, v, u, np.float64(normals[bv, bu, 0]), np.float64(normals[bv, bu, 1]),
+                     np.float64(normals[bv, bu, 2]), (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
+    else:
+        _nan3(out, v, u)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _cross_row(zp, zc, zn, kp, kc, kn, np_, nc, nn, a0, b, fx, fy, bx, by, bz):
+    """Branch-free cross selection (self, up, left, right, down) over the interior columns.
+
+    A candidate wins when it is valid and (the first valid one or strictly smaller).
+    Writes the normalised, camera-facing normal (NaN where none) into bx, by, bz.
+    """
+    ifx = 1.0 / fx
+    by_ = b / fy
+    for u in range(1, zc.size - 1):  # constant start: no index wrap-around checks
+        zq = np.float64(zc[u])
+        x = np.float64(nc[u, 0])
+        y = np.float64(nc[u, 1])
+        t = np.float64(nc[u, 2])
+        f = (zq == zq) & (x == x)
+        k = kc[u]
+        # up
+        zr = zp[u]
+        xr = np.float64(np_[u, 0])
+        kr = kp[u]
+        ok = (zr == zr) & (xr == xr)
+        tk = ok & ((not f) | (kr < k))
+        k = kr if tk else k
+        x = xr if tk else x
+        yr = np.float64(np_[u, 1])
+        tr = np.float64(np_[u, 2])
+        y = yr if tk else y
+        t = tr if tk else t
+        f = f | ok
+        # left
+        zr = zc[u - 1]
+        xr = np.float64(nc[u - 1, 0])
+        kr = kc[u - 1]
+        ok = (zr == zr) & (xr == xr)
+        tk = ok & ((not f) | (kr < k))
+        k = kr if tk else k
+        x = xr if tk else x
+        yr = np.float64(nc[u - 1, 1])
+        tr = np.float64(nc[u - 1, 2])
+        y = yr if tk else y
+        t = tr if tk else t
+        f = f | ok
+        # right
+        zr = zc[u + 1]
+        xr = np.float64(nc[u + 1, 0])
+        kr = kc[u + 1]
+        ok = (zr == zr) & (xr == xr)
+        tk = ok & ((not f) | (kr < k))
+        k = kr if tk else k
+        x = xr if tk else x
+        yr = np.float64(nc[u + 1, 1])
+        tr = np.float64(nc[u + 1, 2])
+        y = yr if tk else y
+        t = tr if tk else t
+        f = f | ok
+        # down
+        zr = zn[u]
+        xr = np.float64(nn[u, 0])
+        kr = kn[u]
+        ok = (zr == zr) & (xr == xr)
+        tk = ok & ((not f) | (kr < k))
+        x = xr if tk else x
+        yr = np.float64(nn[u, 1])
+        tr = np.float64(nn[u, 2])
+        y = yr if tk else y
+        t = tr if tk else t
+        f = f | ok
+        nrm = math.sqrt(x * x + y * y + t * t)
+        good = f & (zq == zq) & (nrm > 0.0) & (nrm < np.inf)
+        inv = 1.0 / nrm
+        # orientation: sign of dot(n, X) = z_q (n_x (u - cx) / fx + n_y (v - cy) / fy + n_z)
+        inv = -inv if x * ((u - a0) * ifx) + y * by_ + t > 0.0 else inv
+        bx[u] = x * inv if good else np.nan
+        by[u] = y * inv if good else np.nan
+        bz[u] = t * inv if good else np.nan
+
+
+@nb.njit(**_JIT)
+def _select_rows(v0, v1, z, normals, key, offs, cross, fx, fy, cx, cy, out):
     h, w = z.shape
-    m = offs.shape[0]
-    for v in nb.prange(h):
-        for u in range(w):
-            zq = z[v, u]
-            if not (zq == zq):
-                continue
-            found = False
-            best = 0.0
-            bv = np.int64(v)
-            bu = np.int64(u)
-            for k in range(m):
-                r = v + offs[k, 0]
-                c = u + offs[k, 1]
-                if not _ok(z, normals, r, c):
-                    continue
-                kk = key[r, c]
-                if not found or kk < best:
-                    found = True
-                    best = kk
-                    bv = r
-                    bu = c
-            if found:
-                store_normal(out, v, u, normals[bv, bu, 0], normals[bv, bu, 1],
-                             normals[bv, bu, 2], (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
+    bx = np.empty(w)
+    by = np.empty(w)
+    bz = np.empty(w)
+    for v in range(v0, v1):
+        if cross and 0 < v < h - 1 and w > 2:
+            _cross_row(z[v - 1], z[v], z[v + 1], key[v - 1], key[v], key[v + 1],
+                       normals[v - 1], normals[v], normals[v + 1], cx, v - cy,
+                       fx, fy, bx, by, bz)
+            for u in range(1, w - 1):
+                out[v, u, 0] = bx[u]
+                out[v, u, 1] = by[u]
+                out[v, u, 2] = bz[u]
+            _select_pixel(z, normals, key, offs, fx, fy, cx, cy, v, 0, out)
+            _select_pixel(z, normals, key, offs, fx, fy, cx, cy, v, w - 1, out)
+        else:
+            for u in range(w):
+                _select_pixel(z, normals, key, offs, fx, fy, cx, cy, v, u, out)
 
 
-@nb.njit(cache=True, inline="always")
+def select_min(z, normals, key, offs, fx, fy, cx, cy, out):
+    """Each valid pixel takes the normal of the candidate with the least ``key`` (self first).
+
+    Writes every pixel of ``out`` (NaN at invalid depth and where no candidate exists).
+    """
+    cross = offs.shape == CROSS.shape and bool((offs == CROSS).all())
+    run_rows(_select_rows, z.shape[0], z, normals, key, offs, cross, float(fx), float(fy),
+             float(cx), float(cy), out)
+
+
+@nb.njit(**_INL)
 def _dist(a, r1, c1, b, r2, c2):
-    d0 = a[r1, c1, 0] - b[r2, c2, 0]
-    d1 = a[r1, c1, 1] - b[r2, c2, 1]
-    d2 = a[r1, c1, 2] - b[r2, c2, 2]
+    d0 = np.float64(a[r1, c1, 0]) - np.float64(b[r2, c2, 0])
+    d1 = np.float64(a[r1, c1, 1]) - np.float64(b[r2, c2, 1])
+    d2 = np.float64(a[r1, c1, 2]) - np.float64(b[r2, c2, 2])
     return math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
 
 
-@nb.njit(cache=True, parallel=True)
-def crf_step(z, cur, anchor, kq, sim_mode, tau, sigma, lam, offs, fx, fy, cx, cy, out):
-    """One synchronous pass of per-pixel minimisation of the 3F2N+ CRF energy.
-
-    For pixel q and each candidate normal c (the current normals of the valid pixels in
-    ``offs`` around q, self first),
-    ``E(c) = sigma |c - anchor_q| + lam k_q sum_i w_i |cur_{p_i} - c|`` over the valid
-    8-neighbours p_i, with ``w_i`` the similarity of p_i: 1 (``sim_mode`` 0),
-    ``1 - tau`` (1, the discontinuity reading of Kendall), ``tau`` (2, the prose reading) or
-    the |Pearson| correlation of the depth patches of p_i and q (3). The least energy wins.
-    Exact shortcut: when the current label is the anchor and ``sigma >= lam k_q sum_i w_i``,
-    the triangle inequality proves no candidate beats it, so the pixel is skipped.
-    """
-    h, w = z.shape
+@nb.njit(**_JIT)
+def _crf_rows(v0, v1, z, cur, anchor, kq, sim_mode, tau, sigma, lam, offs, fx, fy, cx, cy,
+              out):
+    w = z.shape[1]
     m = offs.shape[0]
-    for v in nb.prange(h):
-        wi = np.empty(8)
-        ri = np.empty(8, dtype=np.int64)
-        ci = np.empty(8, dtype=np.int64)
+    wi = np.empty(8)
+    ri = np.empty(8, dtype=np.int64)
+    ci = np.empty(8, dtype=np.int64)
+    for v in range(v0, v1):
         for u in range(w):
             zq = z[v, u]
             if not (zq == zq):
+                _nan3(out, v, u)
                 continue
             px = (u - cx) * zq / fx
             py = (v - cy) * zq / fy
@@ -126,7 +237,8 @@ def crf_step(z, cur, anchor, kq, sim_mode, tau, sigma, lam, offs, fx, fy, cx, cy
             same = (has_anchor and cur[v, u, 0] == anchor[v, u, 0]
                     and cur[v, u, 1] == anchor[v, u, 1] and cur[v, u, 2] == anchor[v, u, 2])
             if same and sigma >= lam * k * wsum:
-                store_normal(out, v, u, cur[v, u, 0], cur[v, u, 1], cur[v, u, 2], px, py, zq)
+                store_normal(out, v, u, np.float64(cur[v, u, 0]), np.float64(cur[v, u, 1]),
+                             np.float64(cur[v, u, 2]), px, py, zq)
                 continue
             found = False
             best = 0.0
@@ -150,5 +262,24 @@ def crf_step(z, cur, anchor, kq, sim_mode, tau, sigma, lam, offs, fx, fy, cx, cy
                     bv = r
                     bu = c
             if found:
-                store_normal(out, v, u, cur[bv, bu, 0], cur[bv, bu, 1], cur[bv, bu, 2],
-                             px, py, zq)
+                store_normal(out, v, u, np.float64(cur[bv, bu, 0]), np.float64(cur[bv, bu, 1]),
+                             np.float64(cur[bv, bu, 2]), px, py, zq)
+            else:
+                _nan3(out, v, u)
+
+
+def crf_step(z, cur, anchor, kq, sim_mode, tau, sigma, lam, offs, fx, fy, cx, cy, out):
+    """One synchronous pass of per-pixel minimisation of the 3F2N+ CRF energy.
+
+    For pixel q and each candidate normal c (the current normals of the valid pixels in
+    ``offs`` around q, self first),
+    ``E(c) = sigma |c - anchor_q| + lam k_q sum_i w_i |cur_{p_i} - c|`` over the valid
+    8-neighbours p_i, with ``w_i`` the similarity of p_i: 1 (``sim_mode`` 0),
+    ``1 - tau`` (1, the discontinuity reading of Kendall), ``tau`` (2, the prose reading) or
+    the |Pearson| correlation of the depth patches of p_i and q (3). The least energy wins.
+    Exact shortcut: when the current label is the anchor and ``sigma >= lam k_q sum_i w_i``,
+    the triangle inequality proves no candidate beats it, so the pixel is skipped.
+    Writes every pixel of ``out``.
+    """
+    run_rows(_crf_rows, z.shape[0], z, cur, anchor, kq, int(sim_mode), tau, float(sigma),
+             float(lam), offs, float(fx), float(fy), float(cx), float(cy), out)

@@ -57,6 +57,7 @@ from typing import Any
 import numba as nb
 import numpy as np
 
+from .._parallel import run_rows
 from .._validate import check_choice
 from ..estimators._common import prepare
 
@@ -70,88 +71,251 @@ _INF = np.inf
 _R2 = 1.0 / math.sqrt(2.0)
 
 
-@nb.njit(cache=True, inline="always")
+_JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
+_INL = {"cache": True, "error_model": "numpy", "inline": "always"}
+_SCA = {"cache": True, "error_model": "numpy"}  # scalar helpers: LLVM inlines them
+KIND_CODES = {"mean": 0, "max": 1, "normal": 2, "gauss": 3, "pixel-mean": 4}
+
+
+@nb.njit(**_INL)
 def _sample(z, v, u):
     h, w = z.shape
     if v < 0 or v >= h or u < 0 or u >= w:
         return np.nan
-    return z[v, u]
+    return np.float64(z[v, u])
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(**_SCA)
 def _line(zm, z0, zp, off, inverse, minslope):
     """First derivative z_u, numerator N_u and A = z + off z_u along one image line.
 
     ``minslope``: z_u is the smallest in magnitude of the half central and the two one-sided
     differences (the public code's denominator), else the half central difference.
+    Branch-free (selects only), so that row loops vectorise.
     """
     zd = 0.5 * (zp - zm)
-    if minslope:
-        gl = z0 - zm
-        gr = zp - z0
-        if abs(gl) < abs(zd):
-            zd = gl
-        if abs(gr) < abs(zd):
-            zd = gr
-    if inverse:
-        num = z0 * z0 * z0 * (1.0 / zm - 2.0 / z0 + 1.0 / zp)
-    else:
-        num = 2.0 * zd * zd - z0 * (zp - 2.0 * z0 + zm)
-    return zd, num, z0 + off * zd
+    gl = z0 - zm
+    gr = zp - z0
+    zd1 = gl if (minslope & (abs(gl) < abs(zd))) else zd
+    zd2 = gr if (minslope & (abs(gr) < abs(zd1))) else zd1
+    num_inv = z0 * z0 * z0 * (1.0 / zm - 2.0 / z0 + 1.0 / zp)
+    num_lit = 2.0 * zd2 * zd2 - z0 * (zp - 2.0 * z0 + zm)
+    num = num_inv if inverse else num_lit
+    return zd2, num, z0 + off * zd2
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(**_SCA)
 def _pow15(t):
     return t * math.sqrt(t)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(**_SCA)
 def _graph_curv(c1, c2):
     return abs(c2) / _pow15(1.0 + c1 * c1)
 
 
-@nb.njit(cache=True, parallel=True)
-def _directional(z, fx, fy, cx, cy, inverse, minslope, ku, kv, kg, kb):
-    """Directional curvatures k_u, k_v, k_g, k_b at every pixel (inf where undefined)."""
+@nb.njit(**_SCA)
+def _four(z0, zl, zr, zt, zb, a_off, b_off, fx, fy, inverse, minslope):
+    """The four directional curvatures k_u, k_v, k_g, k_b of one pixel (inf where undefined)."""
+    oku = (zl == zl) & (zr == zr) & (z0 == z0)
+    okv = (zt == zt) & (zb == zb) & (z0 == z0)
+    zu, nu, a = _line(zl, z0, zr, a_off, inverse, minslope)
+    zv, nv, b = _line(zt, z0, zb, b_off, inverse, minslope)
+    ku = fx * fx * abs(nu) / _pow15(a * a + fx * fx * zu * zu)
+    kv = fy * fy * abs(nv) / _pow15(b * b + fy * fy * zv * zv)
+    c_x = fx * zu / a
+    c_y = fy * zv / b
+    c_xx = -fx * fx * nu / (a * a * a)
+    c_yy = -fy * fy * nv / (b * b * b)
+    kg = _graph_curv(_R2 * (c_x + c_y), _R2 * (c_xx + c_yy))
+    kb = _graph_curv(_R2 * (c_x - c_y), _R2 * (c_xx - c_yy))
+    okd = oku & okv & (a != 0.0) & (b != 0.0)
+    return (ku if oku else _INF), (kv if okv else _INF), (kg if okd else _INF), \
+        (kb if okd else _INF)
+
+
+@nb.njit(**_SCA)
+def _fundamental_px(z0, zl, zr, zt, zb, a_off, b_off, fx, fy, inverse, minslope, gauss):
+    """The paper's normal (or Gaussian) depth curvature of one pixel, guard-free form."""
+    ok = z0 == z0 and zl == zl and zr == zr and zt == zt and zb == zb
+    zu, nu, a = _line(zl, z0, zr, a_off, inverse, minslope)
+    zv, nv, b = _line(zt, z0, zb, b_off, inverse, minslope)
+    c_x = fx * zu / a
+    c_y = fy * zv / b
+    c_xx = -fx * fx * nu / (a * a * a)
+    c_yy = -fy * fy * nv / (b * b * b)
+    c_ll = _R2 * (c_xx + c_yy)
+    c_tt = _R2 * (c_xx - c_yy)
+    ll = c_xx * c_yy
+    mm = c_xx * c_ll
+    nn = c_tt * c_yy
+    g = abs(ll * nn - mm * mm)
+    num = ll * zu * zu + 2.0 * mm * zu * zv + nn * zv * zv
+    den = c_x * zu + c_y * zv
+    den = den * den
+    k = abs(num) / den if den > 0.0 else (0.0 if num == 0.0 else _INF)
+    val = g if gauss else k
+    return val if (ok and a != 0.0 and b != 0.0) else _INF
+
+
+@nb.njit(**_SCA)
+def _pixel_line(zm, z0, zp):
+    gc = 0.5 * (zp - zm)
+    gl = z0 - zm
+    gr = zp - z0
+    g2 = min(gc * gc, min(gl * gl, gr * gr))
+    return abs(zm - 2.0 * z0 + zp) / _pow15(1.0 + g2)
+
+
+@nb.njit(**_SCA)
+def _pixel_value(z0, zl, zr, zt, zb, a_off, b_off, fx, fy, kind, inverse, minslope):
+    """Curvature of kind ``kind`` (KIND_CODES) at one pixel from its 5-point stencil."""
+    if kind == 4:
+        ok = z0 == z0 and zl == zl and zr == zr and zt == zt and zb == zb
+        val = 0.5 * (_pixel_line(zl, z0, zr) + _pixel_line(zt, z0, zb))
+        return val if ok else _INF
+    if kind >= 2:
+        return _fundamental_px(z0, zl, zr, zt, zb, a_off, b_off, fx, fy, inverse, minslope,
+                               kind == 3)
+    a, b, c, d = _four(z0, zl, zr, zt, zb, a_off, b_off, fx, fy, inverse, minslope)
+    if kind == 1:
+        return max(max(a, b), max(c, d))
+    return 0.25 * (a + b + c + d)
+
+
+@nb.njit(**_SCA)
+def _mean_max_row(zp, zc, zn, Dp, Dc, Dn, b_off, fx, fy, cx, use_max, inverse, minslope, out):
+    """Branch-free "mean" / "max" (pixel footprint) over the interior of one row.
+
+    ``Dp, Dc, Dn``: inverse depth of the three rows. Same algebra as :func:`_four`, with
+    divisions shared (one reciprocal per line and one for both diagonal terms).
+    """
+    w = zc.size
+    fx2 = fx * fx
+    fy2 = fy * fy
+    for u in range(1, w - 1):
+        z0 = np.float64(zc[u])
+        zl = np.float64(zc[u - 1])
+        zr = np.float64(zc[u + 1])
+        zt = np.float64(zp[u])
+        zb = np.float64(zn[u])
+        oku = (zl == zl) & (zr == zr) & (z0 == z0)
+        okv = (zt == zt) & (zb == zb) & (z0 == z0)
+        zu, nu_l, a = _line(zl, z0, zr, u - cx, False, minslope)
+        zv, nv_l, b = _line(zt, z0, zb, b_off, False, minslope)
+        z3 = z0 * z0 * z0
+        nu_i = z3 * (Dc[u - 1] - 2.0 * Dc[u] + Dc[u + 1])
+        nv_i = z3 * (Dp[u] - 2.0 * Dc[u] + Dn[u])
+        nu = nu_i if inverse else nu_l
+        nv = nv_i if inverse else nv_l
+        ku = fx2 * abs(nu) / _pow15(a * a + fx2 * zu * zu)
+        kv = fy2 * abs(nv) / _pow15(b * b + fy2 * zv * zv)
+        ia = 1.0 / a
+        ib = 1.0 / b
+        c_x = fx * zu * ia
+        c_y = fy * zv * ib
+        c_xx = -fx2 * nu * (ia * ia * ia)
+        c_yy = -fy2 * nv * (ib * ib * ib)
+        cg = _R2 * (c_x + c_y)
+        cb = _R2 * (c_x - c_y)
+        pg = _pow15(1.0 + cg * cg)
+        pb = _pow15(1.0 + cb * cb)
+        r = 1.0 / (pg * pb)
+        kg = abs(_R2 * (c_xx + c_yy)) * pb * r
+        kb = abs(_R2 * (c_xx - c_yy)) * pg * r
+        okd = oku & okv & (a != 0.0) & (b != 0.0)
+        ku = ku if oku else _INF
+        kv = kv if okv else _INF
+        kg = kg if okd else _INF
+        kb = kb if okd else _INF
+        mx = max(max(ku, kv), max(kg, kb))
+        mn = 0.25 * (ku + kv + kg + kb)
+        out[u] = mx if use_max else mn
+
+
+@nb.njit(**_SCA)
+def _pixel_mean_row(zp, zc, zn, out):
+    """Branch-free "pixel-mean" over the interior of one row."""
+    w = zc.size
+    for u in range(1, w - 1):
+        z0 = np.float64(zc[u])
+        zl = np.float64(zc[u - 1])
+        zr = np.float64(zc[u + 1])
+        zt = np.float64(zp[u])
+        zb = np.float64(zn[u])
+        ok = (z0 == z0) & (zl == zl) & (zr == zr) & (zt == zt) & (zb == zb)
+        val = 0.5 * (_pixel_line(zl, z0, zr) + _pixel_line(zt, z0, zb))
+        out[u] = val if ok else _INF
+
+
+@nb.njit(**_SCA)
+def _other_row(zp, zc, zn, b_off, fx, fy, cx, kind, inverse, minslope, out):
+    w = zc.size
+    for u in range(1, w - 1):
+        out[u] = _pixel_value(np.float64(zc[u]), np.float64(zc[u - 1]), np.float64(zc[u + 1]),
+                              np.float64(zp[u]), np.float64(zn[u]), u - cx, b_off, fx, fy,
+                              kind, inverse, minslope)
+
+
+@nb.njit(**_JIT)
+def _curvature_rows(v0, v1, z, fx, fy, cx, cy, kind, inverse, minslope, out):
+    """Curvature at the pixel itself (pixel footprint) for the rows [v0, v1)."""
     h, w = z.shape
-    for v in nb.prange(h):
+    D = np.empty((3, w))  # rolling inverse depth of rows v-1, v, v+1 (slot = row % 3)
+    if kind <= 1:
+        for r in range(max(v0 - 1, 0), min(v0 + 1, h)):
+            for u in range(w):
+                D[r % 3, u] = 1.0 / np.float64(z[r, u])
+    for v in range(v0, v1):
+        b_off = v - cy
+        if kind <= 1 and v + 1 < h:
+            Dn = D[(v + 1) % 3]
+            zn = z[v + 1]
+            for u in range(w):
+                Dn[u] = 1.0 / np.float64(zn[u])
+        if 0 < v < h - 1 and w > 2:
+            if kind <= 1:
+                _mean_max_row(z[v - 1], z[v], z[v + 1], D[(v - 1) % 3], D[v % 3],
+                              D[(v + 1) % 3], b_off, fx, fy, cx, kind == 1, inverse, minslope,
+                              out[v])
+            elif kind == 4:
+                _pixel_mean_row(z[v - 1], z[v], z[v + 1], out[v])
+            else:
+                _other_row(z[v - 1], z[v], z[v + 1], b_off, fx, fy, cx, kind, inverse,
+                           minslope, out[v])
+            edge = (0, w - 1)
+        else:
+            edge = (-1, -1)
         for u in range(w):
-            z0 = z[v, u]
-            zl = _sample(z, v, u - 1)
-            zr = _sample(z, v, u + 1)
-            zt = _sample(z, v - 1, u)
-            zb = _sample(z, v + 1, u)
-            oku = zl == zl and zr == zr and z0 == z0
-            okv = zt == zt and zb == zb and z0 == z0
-            zu = 0.0
-            nu = 0.0
-            a = 0.0
-            zv = 0.0
-            nv = 0.0
-            b = 0.0
-            if oku:
-                zu, nu, a = _line(zl, z0, zr, u - cx, inverse, minslope)
-                ku[v, u] = fx * fx * abs(nu) / _pow15(a * a + fx * fx * zu * zu)
-            else:
-                ku[v, u] = _INF
-            if okv:
-                zv, nv, b = _line(zt, z0, zb, v - cy, inverse, minslope)
-                kv[v, u] = fy * fy * abs(nv) / _pow15(b * b + fy * fy * zv * zv)
-            else:
-                kv[v, u] = _INF
-            if oku and okv and a != 0.0 and b != 0.0:
-                c_x = fx * zu / a
-                c_y = fy * zv / b
-                c_xx = -fx * fx * nu / (a * a * a)
-                c_yy = -fy * fy * nv / (b * b * b)
-                kg[v, u] = _graph_curv(_R2 * (c_x + c_y), _R2 * (c_xx + c_yy))
-                kb[v, u] = _graph_curv(_R2 * (c_x - c_y), _R2 * (c_xx - c_yy))
-            else:
-                kg[v, u] = _INF
-                kb[v, u] = _INF
+            if edge[0] >= 0 and u != edge[0] and u != edge[1]:
+                continue
+            out[v, u] = _pixel_value(_sample(z, v, u), _sample(z, v, u - 1),
+                                     _sample(z, v, u + 1), _sample(z, v - 1, u),
+                                     _sample(z, v + 1, u), u - cx, b_off, fx, fy, kind,
+                                     inverse, minslope)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(**_JIT)
+def _directional_rows(v0, v1, z, fx, fy, cx, cy, inverse, minslope, ku, kv, kg, kb):
+    """Directional curvatures k_u, k_v, k_g, k_b at every pixel (inf where undefined)."""
+    w = z.shape[1]
+    for v in range(v0, v1):
+        for u in range(w):
+            a, b, c, d = _four(_sample(z, v, u), _sample(z, v, u - 1), _sample(z, v, u + 1),
+                               _sample(z, v - 1, u), _sample(z, v + 1, u), u - cx, v - cy,
+                               fx, fy, inverse, minslope)
+            ku[v, u] = a
+            kv[v, u] = b
+            kg[v, u] = c
+            kb[v, u] = d
+
+
+def _directional(z, fx, fy, cx, cy, inverse, minslope, ku, kv, kg, kb):
+    run_rows(_directional_rows, z.shape[0], z, fx, fy, cx, cy, inverse, minslope,
+             ku, kv, kg, kb)
+
+
+@nb.njit(**_INL)
 def _at_inf(k, v, u):
     h, w = k.shape
     if v < 0 or v >= h or u < 0 or u >= w:
@@ -159,27 +323,14 @@ def _at_inf(k, v, u):
     return k[v, u]
 
 
-@nb.njit(cache=True, parallel=True)
-def _aggregate(z, ku, kv, kg, kb, use_max, at_pixel, out):
-    """Mean or maximum of the eight directional curvatures the neighbours point at q.
-
-    ``at_pixel``: of the four directional curvatures of q itself instead.
-    """
-    h, w = z.shape
-    for v in nb.prange(h):
+@nb.njit(**_JIT)
+def _aggregate_rows(v0, v1, z, ku, kv, kg, kb, use_max, out):
+    """Mean or maximum of the eight directional curvatures the neighbours point at q."""
+    w = z.shape[1]
+    for v in range(v0, v1):
         for u in range(w):
             if not (z[v, u] == z[v, u]):
                 out[v, u] = _INF
-                continue
-            if at_pixel:
-                a = ku[v, u]
-                b = kv[v, u]
-                c = kg[v, u]
-                d = kb[v, u]
-                if use_max:
-                    out[v, u] = max(max(a, b), max(c, d))
-                else:
-                    out[v, u] = 0.25 * (a + b + c + d)
                 continue
             t0 = _at_inf(ku, v, u - 1)
             t1 = _at_inf(ku, v, u + 1)
@@ -195,74 +346,6 @@ def _aggregate(z, ku, kv, kg, kb, use_max, at_pixel, out):
                 out[v, u] = 0.125 * (t0 + t1 + t2 + t3 + t4 + t5 + t6 + t7)
 
 
-@nb.njit(cache=True, parallel=True)
-def _fundamental(z, fx, fy, cx, cy, inverse, minslope, gauss, out):
-    """The paper's normal (or Gaussian) depth curvature at each pixel, guard-free form."""
-    h, w = z.shape
-    for v in nb.prange(h):
-        for u in range(w):
-            z0 = z[v, u]
-            zl = _sample(z, v, u - 1)
-            zr = _sample(z, v, u + 1)
-            zt = _sample(z, v - 1, u)
-            zb = _sample(z, v + 1, u)
-            if not (z0 == z0 and zl == zl and zr == zr and zt == zt and zb == zb):
-                out[v, u] = _INF
-                continue
-            zu, nu, a = _line(zl, z0, zr, u - cx, inverse, minslope)
-            zv, nv, b = _line(zt, z0, zb, v - cy, inverse, minslope)
-            if a == 0.0 or b == 0.0:
-                out[v, u] = _INF
-                continue
-            c_x = fx * zu / a
-            c_y = fy * zv / b
-            c_xx = -fx * fx * nu / (a * a * a)
-            c_yy = -fy * fy * nv / (b * b * b)
-            c_ll = _R2 * (c_xx + c_yy)
-            c_tt = _R2 * (c_xx - c_yy)
-            ll = c_xx * c_yy
-            mm = c_xx * c_ll
-            nn = c_tt * c_yy
-            if gauss:
-                out[v, u] = abs(ll * nn - mm * mm)
-                continue
-            num = ll * zu * zu + 2.0 * mm * zu * zv + nn * zv * zv
-            den = c_x * zu + c_y * zv
-            den = den * den
-            if den > 0.0:
-                out[v, u] = abs(num) / den
-            elif num == 0.0:
-                out[v, u] = 0.0
-            else:
-                out[v, u] = _INF
-
-
-@nb.njit(cache=True, inline="always")
-def _pixel_line(zm, z0, zp):
-    gc = 0.5 * (zp - zm)
-    gl = z0 - zm
-    gr = zp - z0
-    g2 = min(gc * gc, min(gl * gl, gr * gr))
-    return abs(zm - 2.0 * z0 + zp) / _pow15(1.0 + g2)
-
-
-@nb.njit(cache=True, parallel=True)
-def _pixel_mean(z, out):
-    """The public code's pixel-domain mean curvature (raw depth units)."""
-    h, w = z.shape
-    for v in nb.prange(h):
-        for u in range(w):
-            z0 = z[v, u]
-            zl = _sample(z, v, u - 1)
-            zr = _sample(z, v, u + 1)
-            zt = _sample(z, v - 1, u)
-            zb = _sample(z, v + 1, u)
-            if not (z0 == z0 and zl == zl and zr == zr and zt == zt and zb == zb):
-                out[v, u] = _INF
-                continue
-            out[v, u] = 0.5 * (_pixel_line(zl, z0, zr) + _pixel_line(zt, z0, zb))
-
-
 def curvature_map(z: np.ndarray, fx: float, fy: float, cx: float, cy: float, kind: str,
                   derivatives: str = "inverse-depth", slope: str = "min",
                   footprint: str = "pixel") -> np.ndarray:
@@ -271,17 +354,16 @@ def curvature_map(z: np.ndarray, fx: float, fy: float, cx: float, cy: float, kin
     out = np.empty((h, w), dtype=np.float64)
     inverse = derivatives == "inverse-depth"
     minslope = slope == "min"
-    if kind == "pixel-mean":
-        _pixel_mean(z, out)
-    elif kind in ("normal", "gauss"):
-        _fundamental(z, fx, fy, cx, cy, inverse, minslope, kind == "gauss", out)
-    else:
+    if footprint == "neighbours" and kind in ("mean", "max"):
         ku = np.empty((h, w))
         kv = np.empty((h, w))
         kg = np.empty((h, w))
         kb = np.empty((h, w))
         _directional(z, fx, fy, cx, cy, inverse, minslope, ku, kv, kg, kb)
-        _aggregate(z, ku, kv, kg, kb, kind == "max", footprint == "pixel", out)
+        run_rows(_aggregate_rows, h, z, ku, kv, kg, kb, kind == "max", out)
+    else:
+        run_rows(_curvature_rows, h, z, float(fx), float(fy), float(cx), float(cy),
+                 KIND_CODES[kind], inverse, minslope, out)
     return out
 
 
