@@ -200,3 +200,10 @@ def test_progress_counter_without_tqdm(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(builtins, "__import__", no_tqdm)
     generate(tmp_path, indoor=1, outdoor=0, views=2, noise=(), K=SMALL_K, size=SMALL, progress=True)
     assert "synth: 2/2 views" in capsys.readouterr().err
+
+
+def test_pose_constraints_validated():
+    with pytest.raises(ValueError, match="min_valid"):
+        PoseConstraints(min_valid=1.5)
+    with pytest.raises(ValueError, match="median_depth"):
+        PoseConstraints(median_depth=(3.0, 1.0))

@@ -47,6 +47,17 @@ class PoseConstraints:
     max_tries: int = 300
     preview_scale: float = 0.25
 
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.min_valid <= 1.0:
+            raise ValueError(f"min_valid must be in [0, 1]; got {self.min_valid}")
+        lo, hi = self.median_depth
+        if not 0.0 < lo <= hi:
+            raise ValueError(f"median_depth must be (lo, hi) with 0 < lo <= hi; got {self.median_depth}")
+        if self.max_tries < 1 or not 0.0 < self.preview_scale <= 1.0:
+            raise ValueError("max_tries must be >= 1 and preview_scale in (0, 1]")
+        if self.min_depth < 0 or self.clearance < 0:
+            raise ValueError("min_depth and clearance must be >= 0")
+
     def as_dict(self) -> dict:
         d = asdict(self)
         d["median_depth"] = list(self.median_depth)
