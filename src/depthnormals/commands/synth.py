@@ -22,6 +22,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="add a user mesh scene (OBJ, PLY, STL, GLB; needs trimesh); repeatable")
     parser.add_argument("--width", type=int, default=512, help="image width (default 512, Kinect v2)")
     parser.add_argument("--height", type=int, default=424, help="image height (default 424)")
+    parser.add_argument("--min-valid", type=float, default=0.9,
+                        help="camera poses must see a surface in this share of pixels (default 0.9; "
+                             "lower it for single-object meshes)")
+    parser.add_argument("--median-depth", default="0.8,4.0", metavar="LO,HI",
+                        help="camera poses must have their median depth in LO..HI metres (default 0.8,4.0)")
     parser.add_argument("--export-3f2n", type=Path, default=None, metavar="DIR",
                         help="also export the clean frames to the 3F2N format in DIR")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -30,7 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..camera import Intrinsics
     from ..render import KINECT_V2
-    from ..synth import export_3f2n, generate
+    from ..synth import PoseConstraints, export_3f2n, generate
 
     noise = [] if args.noise.strip().lower() in ("", "none") else [s.strip() for s in args.noise.split(",")]
     if (args.width, args.height) == (512, 424):
@@ -38,9 +43,15 @@ def run(args: argparse.Namespace) -> int:
     else:  # same field of view as the Kinect v2, centred principal point
         f = KINECT_V2.fx * args.width / 512.0
         K = Intrinsics(f, f, (args.width - 1) / 2.0, (args.height - 1) / 2.0)
+    try:
+        lo, hi = (float(x) for x in args.median_depth.split(","))
+    except ValueError as exc:
+        raise ValueError(f"--median-depth must be LO,HI in metres; got {args.median_depth!r}") from exc
+    constraints = PoseConstraints(min_valid=args.min_valid, median_depth=(lo, hi))
     summary = generate(args.out, indoor=args.indoor, outdoor=args.outdoor, views=args.views,
                        seed=args.seed, noise=noise, meshes=args.mesh, K=K,
-                       size=(args.height, args.width), progress=not args.no_progress)
+                       size=(args.height, args.width), constraints=constraints,
+                       progress=not args.no_progress)
     print(f"{summary.root}: {summary.frames} views ({summary.written} rendered, {summary.skipped} "
           f"already there) in {summary.seconds:.1f} s; clean render {summary.render_ms_per_frame:.1f} "
           "ms per frame")

@@ -23,6 +23,7 @@ Examples
 
 from __future__ import annotations
 
+import re
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -159,7 +160,7 @@ def sample_poses(scene: Scene, n: int, *, rng: np.random.Generator, K: Any = KIN
             if ok:
                 poses[k] = pose
                 break
-            key = why.split(" ")[0] if why[0].isdigit() else why.split(" <")[0].split(" outside")[0]
+            key = re.sub(r"\d+(\.\d+)?", "#", why)
             reasons[key] = reasons.get(key, 0) + 1
         else:
             common = max(reasons, key=reasons.get) if reasons else "unknown"

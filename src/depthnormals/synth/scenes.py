@@ -488,8 +488,8 @@ def load_mesh_scene(path: str | Path, *, eye_box: Any = None, target_box: Any = 
 
     trimesh is imported only here (``pip install 'depthnormals[synth]'``). Multi-mesh files
     are flattened into one triangle soup. Default camera boxes: the mesh bounding box
-    enlarged by 50 % (eyes outside the object are then likely) and the bounding box itself
-    (targets).
+    enlarged by max(its largest side, 4 m) on every side (eyes) and the bounding box itself
+    (targets); world z is taken as up.
 
     Parameters
     ----------
@@ -527,8 +527,8 @@ def load_mesh_scene(path: str | Path, *, eye_box: Any = None, target_box: Any = 
     if not np.all(np.isfinite(V)):
         raise ValueError(f"{path}: the mesh has non-finite vertices")
     lo, hi = V.min(0), V.max(0)
-    c, e = (lo + hi) / 2, (hi - lo) / 2
-    eb = np.asarray(eye_box, float) if eye_box is not None else np.stack([c - 1.5 * e, c + 1.5 * e])
+    m = max(float((hi - lo).max()), 4.0)  # room for viewing distances up to ~4 m
+    eb = np.asarray(eye_box, float) if eye_box is not None else np.stack([lo - m, hi + m])
     tb = np.asarray(target_box, float) if target_box is not None else np.stack([lo, hi])
     for name, bx in (("eye_box", eb), ("target_box", tb)):
         if bx.shape != (2, 3):
