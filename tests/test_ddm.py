@@ -131,7 +131,10 @@ def test_pixel_mean_reproduces_the_public_code_on_the_torusknot(torusknot):
 def test_default_3f2n_plus_on_the_torusknot(torusknot):
     fr, m, _ = torusknot
     n = dn.estimate_normals(fr.depth, fr.K, method="3f2n+")
-    assert dn.normal_metrics(n, fr.normals, mask=m, folded=True).mean < 1.40
+    e = dn.normal_metrics(n, fr.normals, mask=m, folded=True).mean
+    # golden value of the default (metric mean curvature), measured at the integration pass;
+    # 0.0011 above the public code's unit-dependent pixel-mean 1.3962 (docs/3f2n-plus.md)
+    assert e == pytest.approx(1.3973, abs=5e-4)
 
 
 def test_output_is_unit_camera_facing_float32_and_nan_at_invalid(box):
