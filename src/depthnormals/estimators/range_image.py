@@ -91,93 +91,134 @@ def _box(src, dst, r):
         return
     d = dst[r:r + m]
     s0 = src[0:m]
+    s1 = src[1:1 + m]
+    s2 = src[2:2 + m]
+    if r == 1:  # the common windows in one pass (taps in registers)
+        for k in range(m):
+            d[k] = s0[k] + s1[k] + s2[k]
+        return
+    s3 = src[3:3 + m]
+    s4 = src[4:4 + m]
+    if r == 2:
+        for k in range(m):
+            d[k] = s0[k] + s1[k] + s2[k] + s3[k] + s4[k]
+        return
     for k in range(m):
-        d[k] = s0[k]
-    for i in range(1, 2 * r + 1):
+        d[k] = s0[k] + s1[k] + s2[k] + s3[k] + s4[k]
+    for i in range(5, 2 * r + 1):
         si = src[i:i + m]
         for k in range(m):
             d[k] += si[k]
 
 
 @nb.njit(cache=True, error_model=_NUMPY, inline="always")
-def _axpy(dst, a, src):
-    """dst += a src (same length)."""
+def _box_clipped(src, dst, r):
+    """As :func:`_box`, and the window clipped at the ends for the first and last r columns."""
+    w = src.size
+    _box(src, dst, r)
+    left = min(r, w)
+    for u in range(left):
+        _box_at(src, dst, r, u)
+    for u in range(max(w - r, left), w):
+        _box_at(src, dst, r, u)
+
+
+@nb.njit(cache=True, error_model=_NUMPY, inline="always")
+def _box_at(src, dst, r, u):
+    w = src.size
+    t = 0.0
+    for c in range(max(u - r, 0), min(u + r + 1, w)):
+        t += src[c]
+    dst[u] = t
+
+
+@nb.njit(cache=True, error_model=_NUMPY, inline="always")
+def _axpy2(dst, a, x, b, y):
+    """dst += a x + b y (same length)."""
     for k in range(dst.size):
-        dst[k] += a * src[k]
+        dst[k] += a * x[k] + b * y[k]
+
+
+# the horizontal window sums of one row, H[q] (ring slot): q = 0 k, 1 x k, 2 invalid count
+# (k = s / z, 0 where z is invalid), 3 s, 4 x s, 5 x^2 s (geometry), s = 1 / (x^2 + y^2 + 1)
+_FALS_KMAX = 1e12  # larger k (depth < 1e-12) is left to the exact per-pixel path
 
 
 @nb.njit(cache=True, error_model=_NUMPY)
-def _fals_hrow(z, rr, xs, cy, fy, r, slot, hk, hxk, hs, hxs, hxxs, krow, srow):
-    """Horizontal window sums of k = s / z, x k (depth) and s, x s, x^2 s (geometry) of row
-    rr, s = 1 / (x^2 + y^2 + 1), into ring slot ``slot`` (columns r .. w-r-1)."""
+def _fals_hrow(z, rr, xs, cy, fy, r, H, krow, srow, crow):
+    """Horizontal window sums (clipped at the image border) of row rr into H (6, w).
+
+    Invalid pixels contribute 0 to every sum and 1 to the invalid count."""
     w = xs.size
     y = (rr - cy) / fy
     y2 = y * y + 1.0
     zr = z[rr]
     for c in range(w):
-        srow[c] = 1.0 / (xs[c] * xs[c] + y2)
-    for c in range(w):
-        krow[c] = srow[c] / np.float64(zr[c])  # NaN propagates from invalid depth
-    _box(krow, hk[slot], r)
-    _box(srow, hs[slot], r)
+        zz = np.float64(zr[c])
+        t = 1.0 / ((xs[c] * xs[c] + y2) * zz)  # k = s / z: one division
+        ok = t < _FALS_KMAX  # False for NaN (invalid depth)
+        krow[c] = t if ok else 0.0
+        srow[c] = t * zz if ok else 0.0
+        crow[c] = 0.0 if ok else 1.0
+    _box_clipped(krow, H[0], r)
+    _box_clipped(crow, H[2], r)
+    _box_clipped(srow, H[3], r)
     for c in range(w):
         krow[c] *= xs[c]
     for c in range(w):
         srow[c] *= xs[c]
-    _box(krow, hxk[slot], r)
-    _box(srow, hxs[slot], r)
+    _box_clipped(krow, H[1], r)
+    _box_clipped(srow, H[4], r)
     for c in range(w):
         srow[c] *= xs[c]
-    _box(srow, hxxs[slot], r)
+    _box_clipped(srow, H[5], r)
 
 
 @nb.njit(cache=True, error_model=_NUMPY)
-def _fals_vrow(v, cy, fy, r, hk, hxk, hs, hxs, hxxs, xs, acc, bx, by, bz, flag):
-    """Vertical sums over the ring, then n ~ adj(M) b, oriented and normalised (interior of
-    row v; a window with an invalid pixel gives NaN and is flagged)."""
-    n = 2 * r + 1
-    w = xs.size
-    lo = r
-    hi = w - r
-    acc[:, lo:hi] = 0.0
-    for j in range(n):
-        rr = v - r + j
-        y = (rr - cy) / fy
-        slot = rr % n
-        _axpy(acc[0, lo:hi], 1.0, hxk[slot, lo:hi])
-        _axpy(acc[1, lo:hi], y, hk[slot, lo:hi])
-        _axpy(acc[2, lo:hi], 1.0, hk[slot, lo:hi])
-        _axpy(acc[3, lo:hi], 1.0, hxxs[slot, lo:hi])
-        _axpy(acc[4, lo:hi], y, hxs[slot, lo:hi])
-        _axpy(acc[5, lo:hi], 1.0, hxs[slot, lo:hi])
-        _axpy(acc[6, lo:hi], y * y, hs[slot, lo:hi])
-        _axpy(acc[7, lo:hi], y, hs[slot, lo:hi])
-        _axpy(acc[8, lo:hi], 1.0, hs[slot, lo:hi])
-    _fals_solve_row((v - cy) / fy, acc[:, lo:hi], xs[lo:hi], bx[lo:hi], by[lo:hi], bz[lo:hi],
-                    flag[lo:hi])
+def _fals_add(acc, H, y, a, G, yg, b, lo, hi):
+    """acc += a * (the 10 window sums of ring row H at y) + b * (those of G at yg), columns
+    lo .. hi-1 (1-D contiguous views: the loops vectorise)."""
+    _axpy2(acc[0, lo:hi], a, H[1, lo:hi], b, G[1, lo:hi])              # b: x k
+    _axpy2(acc[1, lo:hi], a * y, H[0, lo:hi], b * yg, G[0, lo:hi])     # y k
+    _axpy2(acc[2, lo:hi], a, H[0, lo:hi], b, G[0, lo:hi])              # k
+    _axpy2(acc[3, lo:hi], a, H[2, lo:hi], b, G[2, lo:hi])              # invalid pixels
+    _axpy2(acc[4, lo:hi], a, H[5, lo:hi], b, G[5, lo:hi])              # M: x^2 s
+    _axpy2(acc[5, lo:hi], a * y, H[4, lo:hi], b * yg, G[4, lo:hi])     # x y s
+    _axpy2(acc[6, lo:hi], a, H[4, lo:hi], b, G[4, lo:hi])              # x s
+    _axpy2(acc[7, lo:hi], a * y * y, H[3, lo:hi], b * yg * yg, G[3, lo:hi])  # y^2 s
+    _axpy2(acc[8, lo:hi], a * y, H[3, lo:hi], b * yg, G[3, lo:hi])     # y s
+    _axpy2(acc[9, lo:hi], a, H[3, lo:hi], b, G[3, lo:hi])              # s
 
 
-@nb.njit(cache=True, error_model=_NUMPY, inline="always")
-def _fals_solve_row(yq, acc, xs, bx, by, bz, flag):
-    a0 = acc[0]
-    a1 = acc[1]
-    a2 = acc[2]
-    a3 = acc[3]
-    a4 = acc[4]
-    a5 = acc[5]
-    a6 = acc[6]
-    a7 = acc[7]
-    a8 = acc[8]
+@nb.njit(cache=True, error_model=_NUMPY)
+def _fals_solve_row(yq, acc, xs_, bx_, by_, bz_, flag_, lo, hi):
+    """n ~ adj(M) b from the window sums, oriented and normalised; flagged where the window
+    has an invalid pixel or the solve fails (columns lo .. hi-1)."""
+    a0 = acc[0, lo:hi]
+    a1 = acc[1, lo:hi]
+    a2 = acc[2, lo:hi]
+    a3 = acc[3, lo:hi]
+    a4 = acc[4, lo:hi]
+    a5 = acc[5, lo:hi]
+    a6 = acc[6, lo:hi]
+    a7 = acc[7, lo:hi]
+    a8 = acc[8, lo:hi]
+    a9 = acc[9, lo:hi]
+    xs = xs_[lo:hi]
+    bx = bx_[lo:hi]
+    by = by_[lo:hi]
+    bz = bz_[lo:hi]
+    flag = flag_[lo:hi]
     for k in range(xs.size):
         s0 = a0[k]
         s1 = a1[k]
         s2 = a2[k]
-        m00 = a3[k]
-        m01 = a4[k]
-        m02 = a5[k]
-        m11 = a6[k]
-        m12 = a7[k]
-        m22 = a8[k]
+        m00 = a4[k]
+        m01 = a5[k]
+        m02 = a6[k]
+        m11 = a7[k]
+        m12 = a8[k]
+        m22 = a9[k]
         c00 = m11 * m22 - m12 * m12
         c01 = m02 * m12 - m01 * m22
         c02 = m01 * m12 - m02 * m11
@@ -194,40 +235,60 @@ def _fals_solve_row(yq, acc, xs, bx, by, bz, flag):
         bx[k] = nx * inv
         by[k] = ny * inv
         bz[k] = nz * inv
-        flag[k] = not (nrm > 0.0 and nrm < np.inf)
+        flag[k] = not (nrm > 0.0 and nrm < np.inf and a3[k] < 0.5)
+
+
+@nb.njit(cache=True, error_model=_NUMPY, inline="always")
+def _copy_row(o, bx, by, bz):
+    for k in range(bx.size):
+        o[k, 0] = bx[k]
+        o[k, 1] = by[k]
+        o[k, 2] = bz[k]
 
 
 @nb.njit(cache=True, nogil=True, error_model=_NUMPY)
 def _fals_rows(v0, v1, z, fx, fy, cx, cy, r, out):
+    """FALS over rows [v0, v1): separable box sums over the (clipped) window, horizontal
+    sums per row in a ring, vertical running sums refreshed every 16 rows; pixels whose
+    window holds an invalid pixel take :func:`_fals_pixel`."""
     h, w = z.shape
-    n = 2 * r + 1
+    ns = 2 * r + 2  # ring: the window's rows and the one leaving it
     xs = np.empty(w)
     for c in range(w):
         xs[c] = (c - cx) / fx
-    hk = np.empty((n, w))
-    hxk = np.empty((n, w))
-    hs = np.empty((n, w))
-    hxs = np.empty((n, w))
-    hxxs = np.empty((n, w))
+    H = np.zeros((ns, 6, w))
     krow = np.empty(w)
     srow = np.empty(w)
-    acc = np.empty((9, w))
+    crow = np.empty(w)
+    acc = np.zeros((10, w))
     bx = np.empty(w)
     by = np.empty(w)
     bz = np.empty(w)
     flag = np.empty(w, dtype=np.bool_)
-    nxt = -1  # first row of the ring not yet summed
+    fast = h > 1 and w > 1  # a single row or column: collinear windows, general path
+    nxt = 0  # first row not yet in the ring
+    cur = -2  # the output row acc holds
     for v in range(v0, v1):
         flag[:] = True
-        if r <= v < h - r and w > 2 * r:
-            for rr in range(max(nxt, v - r), v + r + 1):
-                _fals_hrow(z, rr, xs, cy, fy, r, rr % n, hk, hxk, hs, hxs, hxxs, krow, srow)
-            nxt = v + r + 1
-            _fals_vrow(v, cy, fy, r, hk, hxk, hs, hxs, hxxs, xs, acc, bx, by, bz, flag)
-            for u in range(r, w - r):
-                out[v, u, 0] = bx[u]
-                out[v, u, 1] = by[u]
-                out[v, u, 2] = bz[u]
+        if fast:
+            top = max(v - r, 0)
+            bot = min(v + r, h - 1)
+            for rr in range(max(nxt, top), bot + 1):
+                _fals_hrow(z, rr, xs, cy, fy, r, H[rr % ns], krow, srow, crow)
+            nxt = max(nxt, bot + 1)
+            ri = v + r
+            ro = v - r - 1
+            if cur == v - 1 and v % 16 != 0 and ri < h and ro >= 0:
+                _fals_add(acc, H[ri % ns], (ri - cy) / fy, 1.0, H[ro % ns], (ro - cy) / fy, -1.0,
+                          0, w)
+            else:
+                acc[:, :] = 0.0
+                for rr in range(top, bot + 1):
+                    Hr = H[rr % ns]
+                    _fals_add(acc, Hr, (rr - cy) / fy, 1.0, Hr, 0.0, 0.0, 0, w)
+            cur = v
+            _fals_solve_row((v - cy) / fy, acc, xs, bx, by, bz, flag, 0, w)
+            _copy_row(out[v], bx, by, bz)
         for u in range(w):
             if flag[u]:
                 _fals_pixel(z, v, u, fx, fy, cx, cy, r, out)
