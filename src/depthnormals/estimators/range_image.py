@@ -408,17 +408,79 @@ def _sri_pixel(z, R, v, u, fx, fy, cx, cy, deriv, smooth, out):
 
 
 @nb.njit(cache=True, error_model=_NUMPY)
-def _sri_hrow(R, rr, deriv, md, slot, hd):
-    """Horizontal derivative taps of row rr of R into ring slot ``slot`` (columns md..w-md-1)."""
-    w = R.shape[1]
-    for u in range(md, w - md):
-        hd[slot, u] = 0.0
-    for i in range(-md, md + 1):
-        d = deriv[i + md]
-        if d == 0.0:
+def _sri_hrow(Rr, deriv, md, hd):
+    """Horizontal derivative taps of the range row Rr into hd (columns md .. w-md-1)."""
+    mm = Rr.size - 2 * md
+    d = hd[md:md + mm]
+    for k in range(mm):
+        d[k] = 0.0
+    for i in range(2 * md + 1):
+        c = deriv[i]
+        if c == 0.0:
             continue
-        for u in range(md, w - md):
-            hd[slot, u] += d * R[rr, u + i]
+        si = Rr[i:i + mm]
+        for k in range(mm):
+            d[k] += c * si[k]
+
+
+@nb.njit(cache=True, error_model=_NUMPY)
+def _sri_fast_row(v, R, hd, deriv, smooth, iws, fx, fy, cx, cy, vd, ru_, rv_, bx_, by_, bz_,
+                  flag_):
+    """Separable Sobel derivatives and the SRI normal over the interior of row v (views
+    starting at 0, so the loops vectorise); a NaN in the window gives NaN and a flag."""
+    w = R.shape[1]
+    m = deriv.size // 2
+    n = 2 * m + 1
+    mm = w - 2 * m
+    ru = ru_[m:m + mm]
+    rv = rv_[m:m + mm]
+    # d/du: smoothing across (along v) of the per-row derivatives
+    for k in range(mm):
+        ru[k] = 0.0
+    for j in range(n):
+        s = smooth[j]
+        if s == 0.0:
+            continue
+        hj = hd[(v - m + j) % n, m:m + mm]
+        for k in range(mm):
+            ru[k] += s * hj[k]
+    # d/dv: derivative along v per column, then smoothing across (along u)
+    for k in range(w):
+        vd[k] = 0.0
+    for i in range(n):
+        c = deriv[i]
+        if c == 0.0:
+            continue
+        Ri = R[v - m + i]
+        for k in range(w):
+            vd[k] += c * Ri[k]
+    for k in range(mm):
+        rv[k] = 0.0
+    for j in range(n):
+        s = smooth[j]
+        if s == 0.0:
+            continue
+        vj = vd[j:j + mm]
+        for k in range(mm):
+            rv[k] += s * vj[k]
+    Rv = R[v, m:m + mm]
+    bx = bx_[m:m + mm]
+    by = by_[m:m + mm]
+    bz = bz_[m:m + mm]
+    flag = flag_[m:m + mm]
+    y = (v - cy) / fy
+    for k in range(mm):
+        x = (k + m - cx) / fx
+        rq = Rv[k]
+        nx, ny, nz = _sri_normal(ru[k] * iws, rv[k] * iws, rq, x, y, fx, fy)
+        nrm = math.sqrt(nx * nx + ny * ny + nz * nz)
+        inv = 1.0 / nrm
+        inv = -inv if nx * x + ny * y + nz > 0.0 else inv
+        bx[k] = nx * inv
+        by[k] = ny * inv
+        bz[k] = nz * inv
+        chk = nrm * rq * 0.0 + nrm
+        flag[k] = not (chk == chk and nrm > 0.0 and nrm < np.inf)
 
 
 @nb.njit(cache=True, nogil=True, error_model=_NUMPY)
@@ -446,53 +508,11 @@ def _sri_rows(v0, v1, z, R, fx, fy, cx, cy, deriv, smooth, out):
         flag[:] = True
         if m <= v < h - m and w > 2 * m:
             for rr in range(max(nxt, v - m), v + m + 1):
-                _sri_hrow(R, rr, deriv, m, rr % n, hd)
+                _sri_hrow(R[rr], deriv, m, hd[rr % n])
             nxt = v + m + 1
-            # d/du: smoothing across (along v) of the per-row derivatives
-            for u in range(m, w - m):
-                ru[u] = 0.0
-            for j in range(n):
-                s = smooth[j]
-                if s == 0.0:
-                    continue
-                slot = (v - m + j) % n
-                for u in range(m, w - m):
-                    ru[u] += s * hd[slot, u]
-            # d/dv: derivative along v per column, then smoothing across (along u)
-            for u in range(w):
-                vd[u] = 0.0
-            for i in range(n):
-                d = deriv[i]
-                if d == 0.0:
-                    continue
-                rr = v - m + i
-                for u in range(w):
-                    vd[u] += d * R[rr, u]
-            for u in range(m, w - m):
-                rv[u] = 0.0
-            for j in range(n):
-                s = smooth[j]
-                if s == 0.0:
-                    continue
-                for u in range(m, w - m):
-                    rv[u] += s * vd[u - m + j]
-            y = (v - cy) / fy
-            for u in range(m, w - m):
-                x = (u - cx) / fx
-                rq = R[v, u]
-                nx, ny, nz = _sri_normal(ru[u] * iws, rv[u] * iws, rq, x, y, fx, fy)
-                nrm = math.sqrt(nx * nx + ny * ny + nz * nz)
-                inv = 1.0 / nrm
-                inv = -inv if nx * x + ny * y + nz > 0.0 else inv
-                bx[u] = nx * inv
-                by[u] = ny * inv
-                bz[u] = nz * inv
-                chk = nrm * rq * 0.0 + nrm
-                flag[u] = not (chk == chk and nrm > 0.0 and nrm < np.inf)
-            for u in range(m, w - m):
-                out[v, u, 0] = bx[u]
-                out[v, u, 1] = by[u]
-                out[v, u, 2] = bz[u]
+            _sri_fast_row(v, R, hd, deriv, smooth, iws, fx, fy, cx, cy, vd, ru, rv, bx, by, bz,
+                          flag)
+            _copy_row(out[v, m:w - m], bx[m:w - m], by[m:w - m], bz[m:w - m])
         for u in range(w):
             if flag[u]:
                 _sri_pixel(z, R, v, u, fx, fy, cx, cy, deriv, smooth, out)
