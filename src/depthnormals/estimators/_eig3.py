@@ -80,7 +80,7 @@ def smallest_eigenvector_newton(a00, a01, a02, a11, a12, a22):
     trigonometry or branches (so that loops calling it vectorise); returns (x, y, z, ok).
 
     The smallest eigenvalue is the smallest root of the characteristic cubic, reached by
-    Newton's method from 0: below the smallest root the cubic is increasing and concave, so
+    12 steps of Newton's method from 0: below the smallest root the cubic is increasing and concave, so
     the iterates rise monotonically to it (quadratically once close, which they are from the
     start when the smallest eigenvalue is well separated, as for a surface patch). ``ok`` is
     False when the iteration has not settled to rounding, when the eigenvalue is not simple
@@ -100,7 +100,7 @@ def smallest_eigenvector_newton(a00, a01, a02, a11, a12, a22):
           + a02 * (a01 * a12 - a11 * a02))
     lam = 0.0
     step = 0.0
-    for _ in range(4):
+    for _ in range(12):
         f = ((lam - c2) * lam + c1) * lam - c0
         df = (3.0 * lam - 2.0 * c2) * lam + c1
         step = f / df

@@ -1,0 +1,120 @@
+"""The vectorised fast paths of the comparison family agree with their per-pixel general paths,
+and degenerate input gives NaN or a unit normal, never an exception."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import depthnormals as dn
+from depthnormals.analytic import make_scene
+from depthnormals.estimators import pointcloud, range_image
+from depthnormals.estimators._eig3 import smallest_eigenvector, smallest_eigenvector_newton
+
+FAMILY = ("sda-sne", "sne-roadseg", "fals", "sri", "line-mod", "plane-svd", "plane-pca",
+          "vector-svd", "area-weighted", "angle-weighted")
+K = (131.25, 131.25, 79.5, 59.5)
+
+
+@pytest.fixture(scope="module")
+def rough():
+    """A curved scene with noise and holes: every branch of the fast paths is exercised."""
+    rng = np.random.default_rng(7)
+    r = make_scene("sphere-before-wall").render(K=K, shape=(120, 160))
+    z = r.depth.copy()
+    z += rng.normal(0.0, 0.002, z.shape) * (z > 0)
+    z[rng.random(z.shape) < 0.03] = 0.0
+    z[40:47, 60:70] = 0.0
+    return np.where(z > 0, z, np.nan)
+
+
+def _general(pixel, z, *args):
+    out = np.full((*z.shape, 3), np.nan, np.float32)
+    for v in range(z.shape[0]):
+        for u in range(z.shape[1]):
+            pixel(z, v, u, *args, out)
+    return out
+
+
+def _same(a, b, atol):
+    na, nb = np.isnan(a[..., 0]), np.isnan(b[..., 0])
+    assert (na == nb).all()
+    assert np.abs(a[~na] - b[~nb]).max() < atol
+
+
+@pytest.mark.parametrize("window", [3, 5])
+def test_fals_fast_path_equals_general_path(rough, window):
+    fast = dn.fals(rough, K, window=window)
+    slow = _general(range_image._fals_pixel, rough, *K, window // 2)
+    _same(fast, slow, 1e-4)   # ill-conditioned M (window 3): rounding, ~0.005 deg at most
+
+
+def test_sri_fast_path_equals_general_path(rough):
+    from depthnormals.estimators._stencils import gradient_kernels
+    deriv, smooth = gradient_kernels("sobel", 5)
+    R = np.empty(rough.shape)
+    range_image._range_rows(0, rough.shape[0], rough, *K, R)
+    fast = dn.sri(rough, K)
+    out = np.full((*rough.shape, 3), np.nan, np.float32)
+    for v in range(rough.shape[0]):
+        for u in range(rough.shape[1]):
+            range_image._sri_pixel(rough, R, v, u, *K, deriv, smooth, out)
+    _same(fast, out, 1e-6)
+
+
+@pytest.mark.parametrize(("fn", "centred"), [(dn.plane_svd, True), (dn.vector_svd, False)])
+def test_scatter_fast_path_equals_general_path(rough, fn, centred):
+    _same(fn(rough, K), _general(pointcloud._scatter_pixel, rough, *K, 1, centred), 1e-5)
+
+
+@pytest.mark.parametrize(("fn", "angle"), [(dn.area_weighted, False), (dn.angle_weighted, True)])
+def test_fan_fast_path_equals_general_path(rough, fn, angle):
+    _same(fn(rough, K), _general(pointcloud._fan_pixel, rough, *K, pointcloud._RING, angle),
+          1e-6)
+
+
+def test_angle_between_matches_atan2():
+    rng = np.random.default_rng(1)
+    s = np.abs(rng.normal(size=20000)) * 10.0 ** rng.uniform(-8, 8, 20000)
+    c = rng.normal(size=20000) * 10.0 ** rng.uniform(-8, 8, 20000)
+    s[:3] = [0.0, 1.0, 1.0]
+    c[:3] = [1.0, 0.0, -1.0]
+    for si, ci in zip(s, c, strict=True):
+        assert abs(pointcloud.angle_between(si, ci) - math.atan2(si, ci)) <= 4e-16 * math.pi
+
+
+def test_newton_eigenvector_matches_the_trigonometric_one():
+    rng = np.random.default_rng(2)
+    checked = 0
+    for _ in range(2000):
+        P = rng.normal(size=(9, 3)) * rng.uniform(0.01, 1.0, 3)
+        P -= P.mean(0)
+        A = P.T @ P
+        args = (A[0, 0], A[0, 1], A[0, 2], A[1, 1], A[1, 2], A[2, 2])
+        x, y, z, ok = smallest_eigenvector_newton(*args)
+        ref = np.linalg.eigh(A)[1][:, 0]
+        if ok:
+            assert abs(abs(np.dot([x, y, z], ref)) - 1.0) < 1e-10
+            t = smallest_eigenvector(*args)
+            assert abs(abs(np.dot([x, y, z], t)) - 1.0) < 1e-8
+            checked += 1
+    assert checked > 1900
+    # rank 1 (collinear points): not ok, left to the general solver (NaN there)
+    assert not smallest_eigenvector_newton(1.0, 1.0, 1.0, 1.0, 1.0, 1.0)[3]
+    assert not smallest_eigenvector_newton(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)[3]
+
+
+@pytest.mark.parametrize("method", FAMILY)
+@pytest.mark.parametrize("shape", [(1, 9), (9, 1), (2, 2), (3, 40)])
+def test_degenerate_shapes_and_extreme_depths_never_raise(method, shape):
+    rng = np.random.default_rng(3)
+    z = 10.0 ** rng.uniform(-30, 30, shape)
+    n = dn.estimate_normals(z, (1e-3, 1e3, 0.0, 0.0), method=method)
+    assert n.shape == (*shape, 3) and n.dtype == np.float32
+    ok = np.isfinite(n).all(axis=-1)
+    assert (np.isnan(n[~ok]).all(axis=-1)).all()
+    assert np.allclose(np.linalg.norm(n[ok], axis=-1), 1.0, atol=1e-5)
+    if shape in ((1, 9), (9, 1)) and method == "fals":
+        assert not ok.any()   # the rays of one image row or column are coplanar: M singular
