@@ -192,8 +192,9 @@ def _fals_add(acc, H, y, a, G, yg, b, lo, hi):
 
 @nb.njit(cache=True, error_model=_NUMPY)
 def _fals_solve_row(yq, acc, xs_, bx_, by_, bz_, flag_, lo, hi):
-    """n ~ adj(M) b from the window sums, oriented and normalised; flagged where the window
-    has an invalid pixel or the solve fails (columns lo .. hi-1)."""
+    """n ~ adj(M) b from the window sums, oriented and normalised into bx, by, bz;
+    flagged where the window has an invalid pixel or the solve fails (columns lo .. hi-1).
+    Returns the number of flagged pixels."""
     a0 = acc[0, lo:hi]
     a1 = acc[1, lo:hi]
     a2 = acc[2, lo:hi]
@@ -209,6 +210,7 @@ def _fals_solve_row(yq, acc, xs_, bx_, by_, bz_, flag_, lo, hi):
     by = by_[lo:hi]
     bz = bz_[lo:hi]
     flag = flag_[lo:hi]
+    nflag = 0
     for k in range(xs.size):
         s0 = a0[k]
         s1 = a1[k]
@@ -235,7 +237,10 @@ def _fals_solve_row(yq, acc, xs_, bx_, by_, bz_, flag_, lo, hi):
         bx[k] = nx * inv
         by[k] = ny * inv
         bz[k] = nz * inv
-        flag[k] = not (nrm > 0.0 and nrm < np.inf and a3[k] < 0.5)
+        f = not (nrm > 0.0 and nrm < np.inf and a3[k] < 0.5)
+        flag[k] = f
+        nflag += f
+    return nflag
 
 
 @nb.njit(cache=True, error_model=_NUMPY, inline="always")
@@ -269,7 +274,7 @@ def _fals_rows(v0, v1, z, fx, fy, cx, cy, r, out):
     nxt = 0  # first row not yet in the ring
     cur = -2  # the output row acc holds
     for v in range(v0, v1):
-        flag[:] = True
+        nflag = w
         if fast:
             top = max(v - r, 0)
             bot = min(v + r, h - 1)
@@ -287,8 +292,12 @@ def _fals_rows(v0, v1, z, fx, fy, cx, cy, r, out):
                     Hr = H[rr % ns]
                     _fals_add(acc, Hr, (rr - cy) / fy, 1.0, Hr, 0.0, 0.0, 0, w)
             cur = v
-            _fals_solve_row((v - cy) / fy, acc, xs, bx, by, bz, flag, 0, w)
+            nflag = _fals_solve_row((v - cy) / fy, acc, xs, bx, by, bz, flag, 0, w)
             _copy_row(out[v], bx, by, bz)
+        else:
+            flag[:] = True
+        if nflag == 0:
+            continue
         for u in range(w):
             if flag[u]:
                 _fals_pixel(z, v, u, fx, fy, cx, cy, r, out)
