@@ -138,9 +138,9 @@ PEERS: dict[str, Callable] = {
 def _set_threads(n: int) -> None:
     import sys
 
-    import numba
+    from .._parallel import set_num_threads
 
-    numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+    set_num_threads(n)  # our row-band pool and numba's own threads
     if "cv2" in sys.modules:
         sys.modules["cv2"].setNumThreads(n)
     if "torch" in sys.modules:
