@@ -118,3 +118,15 @@ def test_degenerate_shapes_and_extreme_depths_never_raise(method, shape):
     assert np.allclose(np.linalg.norm(n[ok], axis=-1), 1.0, atol=1e-5)
     if shape in ((1, 9), (9, 1)) and method == "fals":
         assert not ok.any()   # the rays of one image row or column are coplanar: M singular
+
+
+def test_sne_roadseg_fast_path_equals_general_path(rough):
+    from depthnormals.estimators import roadseg
+    from depthnormals.estimators._stencils import gradient_kernels
+    deriv, smooth = gradient_kernels("fd", 3)
+    D = np.divide(1.0, rough)
+    out = np.full((*rough.shape, 3), np.nan, np.float32)
+    for v in range(rough.shape[0]):
+        for u in range(rough.shape[1]):
+            roadseg._roadseg_pixel(rough, D, v, u, *K, deriv, smooth, roadseg._NB, out)
+    _same(dn.sne_roadseg(rough, K), out, 1e-6)
