@@ -81,9 +81,11 @@ def _fals_pixel(z, v, u, fx, fy, cx, cy, r, out):
 
 # Vectorisable loops: every loop index starts at 0 on a view, so LLVM sees non-negative,
 # affine indices (a runtime offset such as ``a[u + i]`` keeps numba's negative-index
-# wraparound and blocks vectorisation), and each loop writes one array.
+# wraparound and blocks vectorisation), and each loop writes one array. These row helpers
+# are called once per row, so they are not inlined (numba-level inlining of every call
+# site multiplies the compile time).
 
-@nb.njit(cache=True, error_model=_NUMPY, inline="always")
+@nb.njit(cache=True, error_model=_NUMPY)
 def _box(src, dst, r):
     """dst[r + k] = sum of src[k .. k + 2r] for k in 0 .. w-2r-1."""
     m = src.size - 2 * r
@@ -111,7 +113,7 @@ def _box(src, dst, r):
             d[k] += si[k]
 
 
-@nb.njit(cache=True, error_model=_NUMPY, inline="always")
+@nb.njit(cache=True, error_model=_NUMPY)
 def _box_clipped(src, dst, r):
     """As :func:`_box`, and the window clipped at the ends for the first and last r columns."""
     w = src.size
@@ -123,7 +125,7 @@ def _box_clipped(src, dst, r):
         _box_at(src, dst, r, u)
 
 
-@nb.njit(cache=True, error_model=_NUMPY, inline="always")
+@nb.njit(cache=True, error_model=_NUMPY)
 def _box_at(src, dst, r, u):
     w = src.size
     t = 0.0
@@ -132,7 +134,7 @@ def _box_at(src, dst, r, u):
     dst[u] = t
 
 
-@nb.njit(cache=True, error_model=_NUMPY, inline="always")
+@nb.njit(cache=True, error_model=_NUMPY)
 def _axpy2(dst, a, x, b, y):
     """dst += a x + b y (same length)."""
     for k in range(dst.size):
@@ -243,7 +245,7 @@ def _fals_solve_row(yq, acc, xs_, bx_, by_, bz_, flag_, lo, hi):
     return nflag
 
 
-@nb.njit(cache=True, error_model=_NUMPY, inline="always")
+@nb.njit(cache=True, error_model=_NUMPY)
 def _copy_row(o, bx, by, bz):
     for k in range(bx.size):
         o[k, 0] = bx[k]
