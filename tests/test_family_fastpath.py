@@ -130,3 +130,17 @@ def test_sne_roadseg_fast_path_equals_general_path(rough):
         for u in range(rough.shape[1]):
             roadseg._roadseg_pixel(rough, D, v, u, *K, deriv, smooth, roadseg._NB, out)
     _same(dn.sne_roadseg(rough, K), out, 1e-6)
+
+
+@pytest.mark.parametrize("method", FAMILY)
+def test_row_bands_give_the_single_thread_result(rough, method):
+    """Bands start their rings and running sums afresh: threads change nothing."""
+    before = dn.get_num_threads()
+    try:
+        dn.set_num_threads(1)
+        one = dn.estimate_normals(rough, K, method=method)
+        dn.set_num_threads(3)   # 120 rows: bands of 40, 40, 40
+        three = dn.estimate_normals(rough, K, method=method)
+    finally:
+        dn.set_num_threads(before)
+    np.testing.assert_array_equal(one, three)
