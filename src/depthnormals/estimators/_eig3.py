@@ -130,6 +130,6 @@ def smallest_eigenvector_newton(a00, a01, a02, a11, a12, a22):
     # settled: after the last step the error is ~ step^2 / gap (quadratic convergence) and
     # sqrt(d) ~ gap on this unit-scale matrix; d well above the rank <= 1 threshold of
     # smallest_eigenvector
-    ok = (m > 0.0 and m < math.inf and step * step <= 1e-17 * math.sqrt(d) and d > 1e-12
-          and lam == lam)
+    ok = (m > 0.0 and m < math.inf and step * step * s <= 1e-17 and d > 1e-12
+          and lam == lam)  # s = 1 / sqrt(d)
     return x * s, y * s, z * s, ok
