@@ -111,7 +111,11 @@ def test_every_method_smoke(small_renders, method, scene):
     """Any registered estimator: unit and facing the camera everywhere, finite and close to
     the truth on radius-3 planar interiors."""
     r = small_renders[scene]
-    n = dn.estimate_normals(r.depth, r.K, method=method)
+    # LINE-MOD drops neighbours whose depth differs by more than its threshold (0.05 m, set
+    # for 640x480): on these 4x smaller views the far floor changes by more than that from
+    # one pixel to the next, so it gets a threshold that keeps a 1-pixel step of the scenes.
+    opts = {"threshold": 0.5} if method.rstrip("+") == "line-mod" else {}
+    n = dn.estimate_normals(r.depth, r.K, method=method, **opts)
     ok = _check_unit_and_facing(n, r)
     inner = planar_interior(r, 3)
     assert inner.sum() > 1000

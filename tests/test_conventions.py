@@ -21,7 +21,17 @@ EXACT = {"3f2n": 1e-3, "d2nt": 1e-2}
 # SRI differentiates range on the image grid: not exact on planes, its error grows with the
 # angle a pixel spans (1.6 deg at fx = 4 below, ~0.001 deg at fx = 525; docs/estimators.md).
 # Component tolerances for it, else 1e-6.
-APPROX = {"sri": 0.03}
+# LINE-MOD fits a first-order Taylor expansion of depth over +-r pixels, and depth is not
+# linear in the pixel position on a plane: where its sample set is asymmetric (image border)
+# a u-only tilt leaks ~1e-3 into ny.
+APPROX = {"sri": 0.03, "line-mod": 0.005}
+# options that adapt a method to these toy scenes (depth changes of ~0.3 per pixel): LINE-MOD's
+# depth-difference threshold is in the depth unit (0.05 m by default)
+TOY_OPTIONS = {"line-mod": {"threshold": 10.0}}
+
+
+def toy_estimate(depth, K, method):
+    return dn.estimate_normals(depth, K, method=method, **TOY_OPTIONS.get(method.rstrip("+"), {}))
 
 
 def comp_tol(method):
@@ -133,8 +143,8 @@ def test_ray_length_map_gives_a_different_answer(method):
     K = (4.0, 4.0, 7.0, 6.0)
     v, u = np.mgrid[0:13, 0:15]
     ray_len = 2.5 * np.sqrt(1 + ((u - 7.0) / 4.0) ** 2 + ((v - 6.0) / 4.0) ** 2)
-    n = dn.estimate_normals(ray_len, K, method=method)
-    planar = dn.estimate_normals(np.full((13, 15), 2.5), K, method=method)
+    n = toy_estimate(ray_len, K, method)
+    planar = toy_estimate(np.full((13, 15), 2.5), K, method)
     err = angle_deg(n[4, 4], planar[4, 4])
     assert err > 5.0
 

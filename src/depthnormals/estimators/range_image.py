@@ -609,21 +609,26 @@ def _linemod_rows(v0, v1, z, fx, fy, cx, cy, r, thr, out):
             a00 = a01 = a11 = 0.0
             b0 = b1 = 0.0
             for j in range(-1, 2):
-                rr = v + j * r
-                if rr < 0 or rr >= h:
-                    continue
                 for i in range(-1, 2):
-                    cc = u + i * r
-                    if cc < 0 or cc >= w or (i == 0 and j == 0):
+                    if i == 0 and j == 0:
                         continue
-                    zn = z[rr, cc]
-                    if not (zn == zn):
+                    # the sample at distance r along (i, j); where it is invalid, outside or
+                    # beyond the threshold, the farthest nearer one that is not
+                    dz = np.nan
+                    s = r
+                    while s >= 1:
+                        rr = v + j * s
+                        cc = u + i * s
+                        if 0 <= rr < h and 0 <= cc < w:
+                            zn = z[rr, cc]
+                            if zn == zn and abs(zn - zq) <= thr:
+                                dz = zn - zq
+                                break
+                        s -= 1
+                    if not (dz == dz):
                         continue
-                    dz = zn - zq
-                    if abs(dz) > thr:
-                        continue
-                    du = i * r
-                    dv = j * r
+                    du = i * s
+                    dv = j * s
                     a00 += du * du
                     a01 += du * dv
                     a11 += dv * dv
@@ -659,6 +664,8 @@ def line_mod(depth: Any, K: Any, *, window: int = 11, threshold: float = 0.05,
     window : int, default 11
         Odd side of the window; the samples are its 8 corner and edge-midpoint pixels,
         at offsets ``{-r, 0, r}^2`` with ``r = window // 2`` (OpenCV: r = 5, i.e. 11).
+        Where such a sample is invalid, outside the image or beyond ``threshold``, the
+        farthest nearer pixel in the same direction that is not takes its place.
     threshold : float, default 0.05
         Largest accepted depth difference to the centre, in the unit of the depth after
         ``depth_scale`` (metres for depth in metres: 0.05 m is OpenCV's 50 on millimetre
@@ -674,9 +681,13 @@ def line_mod(depth: Any, K: Any, *, window: int = 11, threshold: float = 0.05,
 
     Notes
     -----
-    Interpretation (ours): invalid and out-of-image samples are skipped, so the estimate
-    reaches the image border (OpenCV leaves an ``r``-pixel frame as NaN and does not test
-    validity, so zero depth enters its fit). The normal is the cross product of the exact
+    Interpretation (ours): a sample that is invalid, outside the image or beyond the
+    threshold is replaced by the farthest nearer pixel in its direction that passes (OpenCV
+    drops it), so the estimate reaches the image border, survives holes, keeps the near side
+    of a discontinuity and covers steep planes whose depth changes by more than the
+    threshold over ``r`` pixels (OpenCV leaves an ``r``-pixel frame as NaN and does not test
+    validity, so zero depth enters its fit). Where every sample at distance ``r`` passes,
+    the estimate is OpenCV's. The normal is the cross product of the exact
     tangents ``dX/du``, ``dX/dv`` for the fitted gradient, i.e. the limit of the paper's
     three-point plane (OpenCV uses the finite points at ``u + 1`` and ``v + 1``, which
     differs by the curvature of depth over one pixel, ~0.01 deg on a plane). The threshold
