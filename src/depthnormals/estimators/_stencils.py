@@ -63,7 +63,8 @@ def gradient_kernels(kernel: str, size: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _at(D, r, c):
+def sample_or_nan(D, r, c):
+    """``D[r, c]``, or NaN outside the image."""
     h, w = D.shape
     if r < 0 or r >= h or c < 0 or c >= w:
         return np.nan
@@ -91,15 +92,15 @@ def stencil_derivative(D, v, u, a_v, a_u, deriv, smooth):
             d = deriv[i + md]
             if d == 0.0:
                 continue
-            val = _at(D, pv + i * a_v, pu + i * a_u)
+            val = sample_or_nan(D, pv + i * a_v, pu + i * a_u)
             if not (val == val):
                 full = False
                 break
             g += d * val
         if not full:
-            fwd = _at(D, pv + a_v, pu + a_u)
-            bwd = _at(D, pv - a_v, pu - a_u)
-            c = _at(D, pv, pu)
+            fwd = sample_or_nan(D, pv + a_v, pu + a_u)
+            bwd = sample_or_nan(D, pv - a_v, pu - a_u)
+            c = sample_or_nan(D, pv, pu)
             if fwd == fwd and bwd == bwd:
                 g = 0.5 * (fwd - bwd)
             elif c == c and fwd == fwd:
@@ -125,10 +126,10 @@ def roberts_gradient(D, v, u):
     for k in range(4):
         r0 = v - (k // 2)
         c0 = u - (k % 2)
-        a = _at(D, r0, c0)
-        b = _at(D, r0, c0 + 1)
-        c = _at(D, r0 + 1, c0)
-        d = _at(D, r0 + 1, c0 + 1)
+        a = sample_or_nan(D, r0, c0)
+        b = sample_or_nan(D, r0, c0 + 1)
+        c = sample_or_nan(D, r0 + 1, c0)
+        d = sample_or_nan(D, r0 + 1, c0 + 1)
         if a == a and b == b and c == c and d == d:
             d1 = d - a
             d2 = c - b

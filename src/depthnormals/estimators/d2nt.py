@@ -12,6 +12,7 @@ from .._parallel import run_rows
 from .._validate import check_choice
 from ..registry import register
 from ._common import prepare, store_normal
+from ._stencils import sample_or_nan
 
 __all__ = ["VARIANTS", "d2nt", "neighbour_copy_refinement"]
 
@@ -19,20 +20,12 @@ VARIANTS = ("basic", "dag", "mnr")
 _EPS = 1e-8
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
-def _at(z, r, c):
-    h, w = z.shape
-    if r < 0 or r >= h or c < 0 or c >= w:
-        return np.nan
-    return z[r, c]
-
-
 @nb.njit(cache=True, error_model="numpy")
 def central_derivative(z, v, u, a_v, a_u):
     """dz along (a_v, a_u): central difference / 2, else one-sided, else NaN."""
     zc = z[v, u]
-    zf = _at(z, v + a_v, u + a_u)
-    zb = _at(z, v - a_v, u - a_u)
+    zf = sample_or_nan(z, v + a_v, u + a_u)
+    zb = sample_or_nan(z, v - a_v, u - a_u)
     if zf == zf and zb == zb:
         return 0.5 * (zf - zb)
     if zf == zf:
@@ -88,8 +81,8 @@ def dag_derivative(z, v, u, a_v, a_u):
     needs one gets exp(-L) = 0.
     """
     zc = z[v, u]
-    zb = _at(z, v - a_v, u - a_u)
-    zf = _at(z, v + a_v, u + a_u)
+    zb = sample_or_nan(z, v - a_v, u - a_u)
+    zf = sample_or_nan(z, v + a_v, u + a_u)
     gb = zc - zb
     gf = zf - zc
     okb = gb == gb
@@ -100,8 +93,8 @@ def dag_derivative(z, v, u, a_v, a_u):
         return gf
     if not okf:
         return gb
-    wb, wf = _dag_weights(_at(z, v - 2 * a_v, u - 2 * a_u), zb, zc, zf,
-                          _at(z, v + 2 * a_v, u + 2 * a_u))
+    wb, wf = _dag_weights(sample_or_nan(z, v - 2 * a_v, u - 2 * a_u), zb, zc, zf,
+                          sample_or_nan(z, v + 2 * a_v, u + 2 * a_u))
     return wb * gb + wf * gf
 
 
@@ -202,7 +195,8 @@ def _d2nt_row(z, v, fx, fy, cx, cy, dag, out):
 def _laplacian_row(z, v, lap):
     w = z.shape[1]
     for u in range(w):
-        s = _at(z, v, u - 1) + _at(z, v, u + 1) + _at(z, v - 1, u) + _at(z, v + 1, u) - 4.0 * z[v, u]
+        s = (sample_or_nan(z, v, u - 1) + sample_or_nan(z, v, u + 1) + sample_or_nan(z, v - 1, u)
+             + sample_or_nan(z, v + 1, u) - 4.0 * z[v, u])
         lap[v, u] = abs(s) if s == s else np.inf
 
 
