@@ -4,7 +4,7 @@ Each triangle is clipped against the near plane ``z = near`` (Sutherland-Hodgman
 convex polygon of at most four vertices), projected, and binned into square screen tiles
 (each tile's z-buffer stays in cache); inside a tile faces are visited in index order.
 Single-threaded on purpose: on the 2-core target machine, shared with other work, numba's
-parallel threads were 2-4x slower than one thread (docs/_bench_synth.md).
+parallel threads were 2-4x slower than one thread (docs/benchmarks.md, section 7).
 
 A pixel is covered when its integer position lies inside the projected polygon (edges
 inclusive, with a 1e-9 pixel tolerance so shared edges never leave cracks); its depth is

@@ -1,0 +1,63 @@
+"""Single-thread CPU time of the estimators against OpenCV's FALS, for the issues' speed targets.
+
+Thread CPU time (``time.thread_time``) is reported beside wall time because the 2-core VM the
+project runs on is shared and its wall-clock medians move by up to 2x between runs.
+
+    python benchmarks/targets.py [--repeats 40] [--scene demo-room]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+import depthnormals as dn
+from depthnormals.analytic import make_scene
+from depthnormals.commands.bench import machine
+
+
+def _measure(fn, repeats):
+    fn()
+    fn()
+    cpu, wall = [], []
+    for _ in range(repeats):
+        t0, c0 = time.perf_counter(), time.thread_time()
+        fn()
+        cpu.append(time.thread_time() - c0)
+        wall.append(time.perf_counter() - t0)
+    return 1e3 * float(np.median(cpu)), 1e3 * float(np.median(wall)), 1e3 * float(np.min(wall))
+
+
+def main() -> None:
+    import cv2
+
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--repeats", type=int, default=40)
+    parser.add_argument("--scene", default="demo-room")
+    args = parser.parse_args()
+    dn.set_num_threads(1)
+    cv2.setNumThreads(1)
+    r = make_scene(args.scene).render()
+    depth = r.depth.astype(np.float32)
+    K = r.K.matrix
+    fals = cv2.rgbd.RgbdNormals_create(480, 640, cv2.CV_32F, K, 5,
+                                       cv2.rgbd.RgbdNormals_RGBD_NORMALS_METHOD_FALS)
+    points = cv2.rgbd.depthTo3d(depth, K)
+    print(f"machine: {machine()}; 640x480 {args.scene}, 1 thread, median of {args.repeats}")
+    ref = _measure(lambda: fals.apply(points), args.repeats)
+    print(f"{'case':<34}{'CPU ms':>9}{'x FALS':>8}{'wall ms':>9}{'min ms':>9}")
+    print(f"{'opencv FALS w=5 (apply only)':<34}{ref[0]:9.2f}{1.0:8.2f}{ref[1]:9.2f}{ref[2]:9.2f}")
+    cases = [("3f2n", {}), ("d2nt", {"variant": "basic"}), ("d2nt", {}), ("3f2n+", {}),
+             ("3f2n+", {"correlation": "kendall", "crf": True}), ("fals", {}), ("sda-sne", {}),
+             ("plane-svd", {}), ("plane-pca", {}), ("vector-svd", {}), ("area-weighted", {}),
+             ("angle-weighted", {})]
+    for method, opts in cases:
+        res = _measure(lambda m=method, o=opts: dn.estimate_normals(depth, K, method=m, **o), args.repeats)
+        label = method + ("" if not opts else " " + ",".join(f"{k}={v}" for k, v in opts.items()))
+        print(f"{label:<34}{res[0]:9.2f}{res[0] / ref[0]:8.2f}{res[1]:9.2f}{res[2]:9.2f}")
+
+
+if __name__ == "__main__":
+    main()
