@@ -36,6 +36,12 @@ __all__ = [
 DEPTH_SUFFIXES = (".npy", ".png", ".tif", ".tiff", ".bin")
 
 
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 @contextlib.contextmanager
 def atomic_write(path: str | Path, mode: str = "wb") -> Iterator[Any]:
     """Open a temporary file beside ``path``; on success it replaces ``path`` atomically.
@@ -49,6 +55,8 @@ def atomic_write(path: str | Path, mode: str = "wb") -> Iterator[Any]:
         raise FileNotFoundError(f"output folder {parent} does not exist")
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=parent)
     try:
+        # mkstemp creates 0600; give the file the permissions a plain open() would have
+        os.chmod(tmp, 0o666 & ~_umask())
         with os.fdopen(fd, mode) as fh:
             yield fh
             fh.flush()
