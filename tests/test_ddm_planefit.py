@@ -58,6 +58,8 @@ def test_plane_fit_contract(box):
 @pytest.mark.parametrize("kwargs, exc", [
     ({"selection": "ransac"}, ValueError), ({"fit_radius": 0}, ValueError),
     ({"fit_radius": 1.5}, TypeError), ({"fit_radius": True}, TypeError),
+    ({"self_weight": 0.0}, ValueError), ({"self_weight": 1.5}, ValueError),
+    ({"self_weight": "high"}, TypeError),
 ])
 def test_plane_fit_bad_options(box, kwargs, exc):
     r, _ = box

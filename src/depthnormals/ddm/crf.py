@@ -47,7 +47,7 @@ def _nan3(out, v, u):
 
 
 @nb.njit(**_INL)
-def _select_pixel(z, normals, key, offs, fx, fy, cx, cy, v, u, out):
+def _select_pixel(z, normals, key, offs, fx, fy, cx, cy, v, u, selfw, out):
     zq = z[v, u]
     if not (zq == zq):
         _nan3(out, v, u)
@@ -61,7 +61,7 @@ def _select_pixel(z, normals, key, offs, fx, fy, cx, cy, v, u, out):
         c = u + offs[k, 1]
         if not _ok(z, normals, r, c):
             continue
-        kk = key[r, c]
+        kk = key[r, c] * selfw if k == 0 else key[r, c]  # offs[0] is the pixel itself
         if not found or kk < best:
             found = True
             best = kk
@@ -75,7 +75,7 @@ def _select_pixel(z, normals, key, offs, fx, fy, cx, cy, v, u, out):
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _cross_row(zp, zc, zn, kp, kc, kn, np_, nc, nn, a0, b, fx, fy, bx, by, bz):
+def _cross_row(zp, zc, zn, kp, kc, kn, np_, nc, nn, a0, b, fx, fy, selfw, bx, by, bz):
     """Branch-free cross selection (self, up, left, right, down) over the interior columns.
 
     A candidate wins when it is valid and (the first valid one or strictly smaller).
@@ -89,7 +89,7 @@ def _cross_row(zp, zc, zn, kp, kc, kn, np_, nc, nn, a0, b, fx, fy, bx, by, bz):
         y = np.float64(nc[u, 1])
         t = np.float64(nc[u, 2])
         f = (zq == zq) & (x == x)
-        k = kc[u]
+        k = kc[u] * selfw
         # up
         zr = zp[u]
         xr = np.float64(np_[u, 0])
@@ -152,7 +152,7 @@ def _cross_row(zp, zc, zn, kp, kc, kn, np_, nc, nn, a0, b, fx, fy, bx, by, bz):
 
 
 @nb.njit(**_JIT)
-def _select_rows(v0, v1, z, normals, key, offs, cross, fx, fy, cx, cy, out):
+def _select_rows(v0, v1, z, normals, key, offs, cross, fx, fy, cx, cy, selfw, out):
     h, w = z.shape
     bx = np.empty(w)
     by = np.empty(w)
@@ -161,26 +161,28 @@ def _select_rows(v0, v1, z, normals, key, offs, cross, fx, fy, cx, cy, out):
         if cross and 0 < v < h - 1 and w > 2:
             _cross_row(z[v - 1], z[v], z[v + 1], key[v - 1], key[v], key[v + 1],
                        normals[v - 1], normals[v], normals[v + 1], cx, v - cy,
-                       fx, fy, bx, by, bz)
+                       fx, fy, selfw, bx, by, bz)
             for u in range(1, w - 1):
                 out[v, u, 0] = bx[u]
                 out[v, u, 1] = by[u]
                 out[v, u, 2] = bz[u]
-            _select_pixel(z, normals, key, offs, fx, fy, cx, cy, v, 0, out)
-            _select_pixel(z, normals, key, offs, fx, fy, cx, cy, v, w - 1, out)
+            _select_pixel(z, normals, key, offs, fx, fy, cx, cy, v, 0, selfw, out)
+            _select_pixel(z, normals, key, offs, fx, fy, cx, cy, v, w - 1, selfw, out)
         else:
             for u in range(w):
-                _select_pixel(z, normals, key, offs, fx, fy, cx, cy, v, u, out)
+                _select_pixel(z, normals, key, offs, fx, fy, cx, cy, v, u, selfw, out)
 
 
-def select_min(z, normals, key, offs, fx, fy, cx, cy, out):
+def select_min(z, normals, key, offs, fx, fy, cx, cy, out, self_weight=1.0):
     """Each valid pixel takes the normal of the candidate with the least ``key`` (self first).
 
-    Writes every pixel of ``out`` (NaN at invalid depth and where no candidate exists).
+    The pixel's own key is multiplied by ``self_weight`` first (1: plain arg-min, the pixel
+    winning ties; < 1: a neighbour must be clearly better). Writes every pixel of ``out``
+    (NaN at invalid depth and where no candidate exists).
     """
     cross = offs.shape == CROSS.shape and bool((offs == CROSS).all())
     run_rows(_select_rows, z.shape[0], z, normals, key, offs, cross, float(fx), float(fy),
-             float(cx), float(cy), out)
+             float(cx), float(cy), float(self_weight), out)
 
 
 @nb.njit(**_INL)
