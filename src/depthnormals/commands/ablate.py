@@ -77,10 +77,11 @@ def _score(n: np.ndarray, frame) -> float:
 
 def _print(title: str, groups: list[str], rows: list[tuple[str, dict[str, list[float]]]]) -> None:
     width = max(len(r[0]) for r in rows) + 2
+    col = max(10, *(len(g) + 2 for g in groups))
     print(title)
-    print("".ljust(width) + "".join(g[-22:].rjust(24) for g in groups))
+    print("".ljust(width) + "".join(g.rjust(col) for g in groups))
     for label, vals in rows:
-        print(label.ljust(width) + "".join(f"{np.mean(vals[g]):24.3f}" for g in groups))
+        print(label.ljust(width) + "".join(f"{np.mean(vals[g]):{col}.3f}" for g in groups))
 
 
 def run(args: argparse.Namespace) -> int:
