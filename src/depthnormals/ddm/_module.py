@@ -115,8 +115,8 @@ def discontinuity_discrimination(
         (residuals in pixel footprints ``z / fx``, truncated at 1, the pixel itself weighted
         3; :mod:`depthnormals.ddm.planefit`). On the SSN-like synthetic benchmark with noise
         0.1 z/f it roughly halves the error of the curvature selection; on the clean 3F2N
-        torus-knot frame it is worse (docs/3f2n-plus.md). Much slower: ~0.6 s per 640x480
-        frame on one core with the default radius (~0.26 s with ``fit_radius=1``).
+        torus-knot frame it is worse (docs/3f2n-plus.md). Much slower: ~0.27 s per 640x480
+        frame on one core with the default radius (~0.11 s with ``fit_radius=1``).
     fit_radius : int, default 2
         Candidate radius of the plane-fit selection (1..3; (2 r + 1)^2 candidates).
     self_weight : float in (0, 1], default 0.8

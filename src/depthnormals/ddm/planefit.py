@@ -26,7 +26,12 @@ _SELF_WEIGHT = 3.0
 _CAP = 1.0
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+# reassociation lets LLVM vectorise the residual sums; no-NaN flags are never allowed (the
+# support holds finite points only, but candidates' NaN normals are tested explicitly)
+_FASTMATH = {"reassoc", "contract", "nsz", "arcp"}
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", fastmath=_FASTMATH)
 def _plane_fit_rows(v0, v1, z, n, fx, fy, cx, cy, rc, rs, out):
     h, w = z.shape
     ns = (2 * rs + 1) * (2 * rs + 1)
