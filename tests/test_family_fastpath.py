@@ -126,9 +126,10 @@ def test_sne_roadseg_fast_path_equals_general_path(rough):
     deriv, smooth = gradient_kernels("fd", 3)
     D = np.divide(1.0, rough)
     out = np.full((*rough.shape, 3), np.nan, np.float32)
+    cand = np.empty(8)
     for v in range(rough.shape[0]):
         for u in range(rough.shape[1]):
-            roadseg._roadseg_pixel(rough, D, v, u, *K, deriv, smooth, roadseg._NB, out)
+            roadseg._roadseg_pixel(rough, D, v, u, *K, deriv, smooth, roadseg.NEIGHBOURS8, cand, out)
     _same(dn.sne_roadseg(rough, K), out, 1e-6)
 
 

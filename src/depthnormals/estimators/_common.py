@@ -16,7 +16,12 @@ from .._parallel import run_rows
 from .._validate import check_depth
 from ..camera import Intrinsics, as_intrinsics
 
-__all__ = ["finish", "new_output", "prepare", "store_normal"]
+__all__ = ["NEIGHBOURS8", "finish", "new_output", "nz_candidates", "prepare", "store_normal"]
+
+
+#: Offsets (dv, du) of the 8-neighbourhood, row by row.
+NEIGHBOURS8 = np.array([[-1, -1], [-1, 0], [-1, 1], [0, -1], [0, 1], [1, -1], [1, 0], [1, 1]],
+                       dtype=np.int64)
 
 
 def prepare(depth: Any, K: Any, depth_scale: float | None) -> tuple[np.ndarray, Intrinsics]:
@@ -72,3 +77,33 @@ def _finish_rows(v0, v1, normals, z, fx, fy, cx, cy):
 def finish(normals: np.ndarray, z: np.ndarray, fx: float, fy: float, cx: float, cy: float) -> None:
     """Renormalise and orient a float normal map in place (NaN where z is invalid)."""
     run_rows(_finish_rows, z.shape[0], normals, z, fx, fy, cx, cy)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def nz_candidates(z, v, u, nx, ny, fx, fy, cx, cy, nb_off, cand):
+    """3F2N's candidates ``nz_i = -(nx dx_i + ny dy_i) / dz_i`` of the neighbours of (v, u).
+
+    Neighbours outside the image, with invalid depth (NaN) or with ``dz = 0`` give none.
+    Fills ``cand[:n]`` in the order of ``nb_off`` and returns ``n``.
+    """
+    h, w = z.shape
+    zq = z[v, u]
+    xq = (u - cx) * zq / fx
+    yq = (v - cy) * zq / fy
+    n = 0
+    for k in range(nb_off.shape[0]):
+        r = v + nb_off[k, 0]
+        c = u + nb_off[k, 1]
+        if r < 0 or r >= h or c < 0 or c >= w:
+            continue
+        zn = z[r, c]
+        if not (zn == zn):
+            continue
+        dz = zn - zq
+        if dz == 0.0:
+            continue
+        dx = (c - cx) * zn / fx - xq
+        dy = (r - cy) * zn / fy - yq
+        cand[n] = -(nx * dx + ny * dy) / dz
+        n += 1
+    return n

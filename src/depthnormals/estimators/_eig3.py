@@ -12,6 +12,37 @@ _TWO_PI_3 = 2.0 * math.pi / 3.0
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
+def _null_vector(a00, a01, a02, a11, a12, a22, lam):
+    """The longest cross product of two rows of ``A - lam I`` and its squared length.
+
+    Branch-free (selects), so loops calling it vectorise.
+    """
+    r00 = a00 - lam
+    r11 = a11 - lam
+    r22 = a22 - lam
+    # rows: (r00, a01, a02), (a01, r11, a12), (a02, a12, r22)
+    c0x = a01 * a12 - a02 * r11
+    c0y = a02 * a01 - r00 * a12
+    c0z = r00 * r11 - a01 * a01
+    c1x = a01 * r22 - a02 * a12
+    c1y = a02 * a02 - r00 * r22
+    c1z = r00 * a12 - a01 * a02
+    c2x = r11 * r22 - a12 * a12
+    c2y = a12 * a02 - a01 * r22
+    c2z = a01 * a12 - r11 * a02
+    d0 = c0x * c0x + c0y * c0y + c0z * c0z
+    d1 = c1x * c1x + c1y * c1y + c1z * c1z
+    d2 = c2x * c2x + c2y * c2y + c2z * c2z
+    b0 = d0 >= d1 and d0 >= d2
+    b1 = (not b0) and d1 >= d2
+    x = c0x if b0 else (c1x if b1 else c2x)
+    y = c0y if b0 else (c1y if b1 else c2y)
+    z = c0z if b0 else (c1z if b1 else c2z)
+    d = d0 if b0 else (d1 if b1 else d2)
+    return x, y, z, d
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def smallest_eigenvector(a00, a01, a02, a11, a12, a22):
     """Unit eigenvector of the smallest eigenvalue of the symmetric matrix [[a00 a01 a02] ...].
 
@@ -45,28 +76,7 @@ def smallest_eigenvector(a00, a01, a02, a11, a12, a22):
         r = 1.0
     phi = math.acos(r) / 3.0
     lam = q + 2.0 * p * math.cos(phi + _TWO_PI_3)
-    r00 = a00 - lam
-    r11 = a11 - lam
-    r22 = a22 - lam
-    # rows: (r00, a01, a02), (a01, r11, a12), (a02, a12, r22)
-    c0x = a01 * a12 - a02 * r11
-    c0y = a02 * a01 - r00 * a12
-    c0z = r00 * r11 - a01 * a01
-    c1x = a01 * r22 - a02 * a12
-    c1y = a02 * a02 - r00 * r22
-    c1z = r00 * a12 - a01 * a02
-    c2x = r11 * r22 - a12 * a12
-    c2y = a12 * a02 - a01 * r22
-    c2z = a01 * a12 - r11 * a02
-    d0 = c0x * c0x + c0y * c0y + c0z * c0z
-    d1 = c1x * c1x + c1y * c1y + c1z * c1z
-    d2 = c2x * c2x + c2y * c2y + c2z * c2z
-    if d0 >= d1 and d0 >= d2:
-        x, y, z, d = c0x, c0y, c0z, d0
-    elif d1 >= d2:
-        x, y, z, d = c1x, c1y, c1z, d1
-    else:
-        x, y, z, d = c2x, c2y, c2z, d2
+    x, y, z, d = _null_vector(a00, a01, a02, a11, a12, a22, lam)
     # relative to the matrix scale (1 after division by m): rank <= 1 leaves d ~ rounding
     if not (d > 1e-24):
         return math.nan, math.nan, math.nan
@@ -105,27 +115,7 @@ def smallest_eigenvector_newton(a00, a01, a02, a11, a12, a22):
         df = (3.0 * lam - 2.0 * c2) * lam + c1
         step = f / df
         lam -= step
-    r00 = a00 - lam
-    r11 = a11 - lam
-    r22 = a22 - lam
-    c0x = a01 * a12 - a02 * r11
-    c0y = a02 * a01 - r00 * a12
-    c0z = r00 * r11 - a01 * a01
-    c1x = a01 * r22 - a02 * a12
-    c1y = a02 * a02 - r00 * r22
-    c1z = r00 * a12 - a01 * a02
-    c2x = r11 * r22 - a12 * a12
-    c2y = a12 * a02 - a01 * r22
-    c2z = a01 * a12 - r11 * a02
-    d0 = c0x * c0x + c0y * c0y + c0z * c0z
-    d1 = c1x * c1x + c1y * c1y + c1z * c1z
-    d2 = c2x * c2x + c2y * c2y + c2z * c2z
-    b0 = d0 >= d1 and d0 >= d2
-    b1 = (not b0) and d1 >= d2
-    x = c0x if b0 else (c1x if b1 else c2x)
-    y = c0y if b0 else (c1y if b1 else c2y)
-    z = c0z if b0 else (c1z if b1 else c2z)
-    d = d0 if b0 else (d1 if b1 else d2)
+    x, y, z, d = _null_vector(a00, a01, a02, a11, a12, a22, lam)
     s = 1.0 / math.sqrt(d)
     # settled: after the last step the error is ~ step^2 / gap (quadratic convergence) and
     # sqrt(d) ~ gap on this unit-scale matrix; d well above the rank <= 1 threshold of

@@ -10,19 +10,16 @@ import numpy as np
 
 from .._parallel import run_rows
 from ..registry import register
-from ._common import prepare, store_normal
+from ._common import NEIGHBOURS8, nz_candidates, prepare, store_normal
 from ._stencils import gradient_kernels, stencil_derivative
 
 __all__ = ["sne_roadseg"]
 
-_NB = np.array([[-1, -1], [-1, 0], [-1, 1], [0, -1], [0, 1], [1, -1], [1, 0], [1, 1]],
-               dtype=np.int64)
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _roadseg_pixel(z, D, v, u, fx, fy, cx, cy, deriv, smooth, nb_off, out):
+def _roadseg_pixel(z, D, v, u, fx, fy, cx, cy, deriv, smooth, nb_off, cand, out):
     """General path: validity-aware gradients, invalid neighbours give no candidate."""
-    h, w = z.shape
     out[v, u, 0] = np.nan
     out[v, u, 1] = np.nan
     out[v, u, 2] = np.nan
@@ -43,20 +40,8 @@ def _roadseg_pixel(z, D, v, u, fx, fy, cx, cy, deriv, smooth, nb_off, out):
     # sum of the unit vectors (nx, ny, nz_i) / |.|: only its z over its xy matters
     sw = 0.0
     sz = 0.0
-    for k in range(8):
-        r = v + nb_off[k, 0]
-        c = u + nb_off[k, 1]
-        if r < 0 or r >= h or c < 0 or c >= w:
-            continue
-        zn = z[r, c]
-        if not (zn == zn):
-            continue
-        dz = zn - zq
-        if dz == 0.0:
-            continue
-        dx = (c - cx) * zn / fx - xq
-        dy = (r - cy) * zn / fy - yq
-        nzi = -(nx * dx + ny * dy) / dz
+    for k in range(nz_candidates(z, v, u, nx, ny, fx, fy, cx, cy, nb_off, cand)):
+        nzi = cand[k]
         inv = 1.0 / math.sqrt(nx * nx + ny * ny + nzi * nzi)
         sw += inv
         sz += nzi * inv
@@ -138,6 +123,7 @@ def _roadseg_rows(v0, v1, z, D, fx, fy, cx, cy, deriv, smooth, nb_off, out):
     by = np.empty(w)
     bz = np.empty(w)
     flag = np.empty(w, dtype=np.bool_)
+    cand = np.empty(8)
     for v in range(v0, v1):
         flag[:] = True
         if 0 < v < h - 1 and w > 2:
@@ -149,7 +135,7 @@ def _roadseg_rows(v0, v1, z, D, fx, fy, cx, cy, deriv, smooth, nb_off, out):
                 out[v, u, 2] = bz[u]
         for u in range(w):
             if flag[u]:
-                _roadseg_pixel(z, D, v, u, fx, fy, cx, cy, deriv, smooth, nb_off, out)
+                _roadseg_pixel(z, D, v, u, fx, fy, cx, cy, deriv, smooth, nb_off, cand, out)
 
 
 @register("sne-roadseg")
@@ -211,6 +197,6 @@ def sne_roadseg(depth: Any, K: Any, *, depth_scale: float | None = None) -> np.n
     deriv, smooth = gradient_kernels("fd", 3)
     out = np.empty((*z.shape, 3), dtype=np.float32)
     D = np.divide(1.0, z, dtype=np.float64)
-    run_rows(_roadseg_rows, z.shape[0], z, D, cam.fx, cam.fy, cam.cx, cam.cy, deriv, smooth, _NB,
+    run_rows(_roadseg_rows, z.shape[0], z, D, cam.fx, cam.fy, cam.cx, cam.cy, deriv, smooth, NEIGHBOURS8,
              out)
     return out

@@ -11,7 +11,7 @@ import numpy as np
 from .._parallel import run_rows
 from .._validate import check_choice
 from ..registry import register
-from ._common import prepare, store_normal
+from ._common import NEIGHBOURS8, nz_candidates, prepare, store_normal
 from ._stencils import KERNELS, gradient_kernels, roberts_gradient, stencil_derivative
 
 __all__ = ["AGGREGATES", "three_filters_to_normal"]
@@ -19,7 +19,6 @@ __all__ = ["AGGREGATES", "three_filters_to_normal"]
 AGGREGATES = ("median", "mean", "trimean", "trimmed-mean")
 
 # neighbour offsets (dv, du), the 8-neighbourhood
-_NB = np.array([[-1, -1], [-1, 0], [-1, 1], [0, -1], [0, 1], [1, -1], [1, 0], [1, 1]], dtype=np.int64)
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -92,7 +91,6 @@ def median8_pair(a0, a1, a2, a3, a4, a5, a6, a7):
 
 @nb.njit(cache=True, error_model="numpy")
 def _generic_pixel(z, D, v, u, fx, fy, cx, cy, deriv, smooth, roberts, mode, nb_off, cand, out):
-    h, w = z.shape
     zq = z[v, u]
     if roberts:
         gu, gv = roberts_gradient(D, v, u)
@@ -108,22 +106,7 @@ def _generic_pixel(z, D, v, u, fx, fy, cx, cy, deriv, smooth, roberts, mode, nb_
         return
     nx = fx * gu
     ny = fy * gv
-    n = 0
-    for k in range(8):
-        r = v + nb_off[k, 0]
-        c = u + nb_off[k, 1]
-        if r < 0 or r >= h or c < 0 or c >= w:
-            continue
-        zn = z[r, c]
-        if not (zn == zn):
-            continue
-        dz = zn - zq
-        if dz == 0.0:
-            continue
-        dx = (c - cx) * zn / fx - xq
-        dy = (r - cy) * zn / fy - yq
-        cand[n] = -(nx * dx + ny * dy) / dz
-        n += 1
+    n = nz_candidates(z, v, u, nx, ny, fx, fy, cx, cy, nb_off, cand)
     if n == 0 or (nx == 0.0 and ny == 0.0):
         nx = 0.0
         ny = 0.0
@@ -323,5 +306,5 @@ def three_filters_to_normal(depth: Any, K: Any, *, kernel: str = "fd", kernel_si
     fast_fd = kernel == "fd" and kernel_size == 3 and mode in (0, 1)
     D = np.divide(1.0, z, dtype=np.float64)
     run_rows(_threefn_rows, z.shape[0], z, D, cam.fx, cam.fy, cam.cx, cam.cy, deriv, smooth,
-             kernel == "roberts", mode, fast_fd, _NB, out)
+             kernel == "roberts", mode, fast_fd, NEIGHBOURS8, out)
     return out
