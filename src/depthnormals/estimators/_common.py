@@ -1,7 +1,8 @@
 """Shared pieces of every estimator: input preparation and compiled finishing kernels.
 
 Inside the kernels invalid depth is NaN (see :func:`prepare`), so ``z == z`` tests validity.
-All arithmetic is float64 in registers; outputs are float32.
+Arithmetic is float64 in registers (except 3F2N's FD row pass, which runs in the dtype of the
+depth); outputs are float32.
 """
 
 from __future__ import annotations

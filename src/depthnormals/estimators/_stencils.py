@@ -63,17 +63,22 @@ def gradient_kernels(kernel: str, size: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def sample_or_nan(D, r, c):
-    """``D[r, c]``, or NaN outside the image."""
+def sample_or_nan(D, r, c, recip=False):
+    """``D[r, c]`` (its reciprocal, in float64, with ``recip``), or NaN outside the image."""
     h, w = D.shape
     if r < 0 or r >= h or c < 0 or c >= w:
         return np.nan
-    return D[r, c]
+    if recip:
+        return 1.0 / np.float64(D[r, c])
+    return np.float64(D[r, c])
 
 
 @nb.njit(cache=True, error_model="numpy")
-def stencil_derivative(D, v, u, a_v, a_u, deriv, smooth):
-    """Derivative of D at (v, u) along (a_v, a_u), smoothed across it; NaN-aware."""
+def stencil_derivative(D, v, u, a_v, a_u, deriv, smooth, recip=False):
+    """Derivative of D (of 1 / D with ``recip``) at (v, u) along (a_v, a_u), smoothed across it.
+
+    NaN-aware; float64 whatever the dtype of D.
+    """
     md = deriv.size // 2
     ms = smooth.size // 2
     b_v = a_u
@@ -92,15 +97,15 @@ def stencil_derivative(D, v, u, a_v, a_u, deriv, smooth):
             d = deriv[i + md]
             if d == 0.0:
                 continue
-            val = sample_or_nan(D, pv + i * a_v, pu + i * a_u)
+            val = sample_or_nan(D, pv + i * a_v, pu + i * a_u, recip)
             if not (val == val):
                 full = False
                 break
             g += d * val
         if not full:
-            fwd = sample_or_nan(D, pv + a_v, pu + a_u)
-            bwd = sample_or_nan(D, pv - a_v, pu - a_u)
-            c = sample_or_nan(D, pv, pu)
+            fwd = sample_or_nan(D, pv + a_v, pu + a_u, recip)
+            bwd = sample_or_nan(D, pv - a_v, pu - a_u, recip)
+            c = sample_or_nan(D, pv, pu, recip)
             if fwd == fwd and bwd == bwd:
                 g = 0.5 * (fwd - bwd)
             elif c == c and fwd == fwd:
