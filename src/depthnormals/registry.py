@@ -161,6 +161,9 @@ def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
             if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name != "depth_scale"
         )
         own, rest = _split_options(method, info, options, ddm_opts)
+        fused = ddm.fused_plus(method[:-1], depth, K, depth_scale, own, rest)
+        if fused is not None:
+            return fused
         normals = info.func(depth, K, depth_scale=depth_scale, **own)
         return refine(normals, depth, K, depth_scale=depth_scale, **rest)
     info = get_estimator(method)

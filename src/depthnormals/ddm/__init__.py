@@ -5,7 +5,7 @@
 ``depth_curvature`` and ``kendall_map`` expose the two discriminators.
 """
 
-from ._module import NEIGHBOURHOODS, discontinuity_discrimination
+from ._module import NEIGHBOURHOODS, discontinuity_discrimination, fused_plus
 from .correlation import CORRELATIONS, kendall_map
 from .curvature import CURVATURES, DERIVATIVES, depth_curvature
 
@@ -16,5 +16,6 @@ __all__ = [
     "NEIGHBOURHOODS",
     "depth_curvature",
     "discontinuity_discrimination",
+    "fused_plus",
     "kendall_map",
 ]

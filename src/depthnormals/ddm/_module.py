@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import numbers
 from typing import Any
 
@@ -12,9 +13,10 @@ from ..estimators._common import prepare
 from .correlation import CORRELATIONS, kendall_map
 from .crf import CROSS, SQUARE, crf_step, select_min
 from .curvature import CURVATURES, DERIVATIVES, FOOTPRINTS, SLOPES, curvature_map
+from .fused import fused_3f2n_plus
 from .planefit import plane_fit_select
 
-__all__ = ["NEIGHBOURHOODS", "discontinuity_discrimination"]
+__all__ = ["NEIGHBOURHOODS", "discontinuity_discrimination", "fused_plus"]
 
 NEIGHBOURHOODS = ("square", "cross")
 _CURV = (*CURVATURES, "none")
@@ -163,6 +165,21 @@ def discontinuity_discrimination(
     >>> bool(e1 < e0)
     True
     """
+    opts = _options(curvature=curvature, correlation=correlation, crf=crf, sigma=sigma,
+                    lambda_=lambda_, iterations=iterations, neighbourhood=neighbourhood,
+                    derivatives=derivatives, slope=slope, footprint=footprint,
+                    selection=selection, fit_radius=fit_radius, self_weight=self_weight)
+    z, cam = prepare(depth, K, depth_scale)
+    n_in = check_normals(normals, shape=z.shape)
+    n_in = np.ascontiguousarray(n_in, dtype=np.float32)
+    return _refine(z, cam.fx, cam.fy, cam.cx, cam.cy, n_in, None, None, opts)
+
+
+def _options(*, curvature: str, correlation: str, crf: bool, sigma: float, lambda_: float,
+             iterations: int, neighbourhood: str | None, derivatives: str, slope: str,
+             footprint: str, selection: str, fit_radius: int,
+             self_weight: float) -> dict[str, Any]:
+    """Validate the module's options; return them normalised."""
     check_choice(curvature, "curvature", _CURV)
     check_choice(correlation, "correlation", CORRELATIONS)
     check_choice(derivatives, "derivatives", DERIVATIVES)
@@ -190,23 +207,33 @@ def discontinuity_discrimination(
         raise TypeError(f"fit_radius must be an integer in 1..3; got {fit_radius!r}")
     if not 1 <= fit_radius <= 3:
         raise ValueError(f"fit_radius must be in 1..3; got {fit_radius}")
-    z, cam = prepare(depth, K, depth_scale)
-    n_in = check_normals(normals, shape=z.shape)
-    n_in = np.ascontiguousarray(n_in, dtype=np.float32)
-    offs = CROSS if neighbourhood == "cross" else SQUARE
-    fx, fy, cx, cy = cam.fx, cam.fy, cam.cx, cam.cy
+    return {"curvature": curvature, "correlation": correlation, "crf": bool(crf),
+            "sigma": sigma, "lam": lam, "iterations": int(iterations),
+            "neighbourhood": neighbourhood, "derivatives": derivatives, "slope": slope,
+            "footprint": footprint, "selection": selection, "fit_radius": int(fit_radius),
+            "self_weight": sw}
 
-    # stage 1: curvature selection (or a plain re-orientation when there is none), or the
-    # plane-fit selection (our noise-robust extension; the curvature then only weights a CRF)
-    if curvature == "none" or (selection == "plane-fit" and not crf):
-        k = np.zeros(z.shape)
-    else:
-        k = curvature_map(z, fx, fy, cx, cy, curvature, derivatives, slope, footprint)
-    n0 = _empty(z.shape)
-    if selection == "plane-fit":
-        plane_fit_select(z, n_in, fx, fy, cx, cy, int(fit_radius), 2, n0)
-    else:
-        select_min(z, n_in, k, offs, fx, fy, cx, cy, n0, self_weight=sw)
+
+def _refine(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
+            n_in: np.ndarray | None, n0: np.ndarray | None, k: np.ndarray | None,
+            o: dict[str, Any]) -> np.ndarray:
+    """The three stages on prepared depth; ``n0``/``k`` given: stage 1 already done."""
+    curvature, correlation, crf = o["curvature"], o["correlation"], o["crf"]
+    offs = CROSS if o["neighbourhood"] == "cross" else SQUARE
+    if n0 is None:
+        # stage 1: curvature selection (or a plain re-orientation when there is none), or
+        # the plane-fit selection (our noise-robust extension; the curvature then only
+        # weights a CRF)
+        if curvature == "none" or (o["selection"] == "plane-fit" and not crf):
+            k = np.zeros(z.shape)
+        else:
+            k = curvature_map(z, fx, fy, cx, cy, curvature, o["derivatives"], o["slope"],
+                              o["footprint"])
+        n0 = _empty(z.shape)
+        if o["selection"] == "plane-fit":
+            plane_fit_select(z, n_in, fx, fy, cx, cy, o["fit_radius"], 2, n0)
+        else:
+            select_min(z, n_in, k, offs, fx, fy, cx, cy, n0, self_weight=o["self_weight"])
 
     tau = np.zeros((1, 1))
     if correlation in ("kendall", "kendall-prose"):
@@ -224,8 +251,44 @@ def discontinuity_discrimination(
     mode = {"none": 0, "kendall": 1, "kendall-prose": 2, "pearson": 3}[correlation]
     kq = k * z if curvature in ("mean", "max") else k
     cur = n0
-    for _ in range(int(iterations)):
+    for _ in range(o["iterations"]):
         out = _empty(z.shape)
-        crf_step(z, cur, n0, kq, mode, tau, sigma, lam, offs, fx, fy, cx, cy, out)
+        crf_step(z, cur, n0, kq, mode, tau, o["sigma"], o["lam"], offs, fx, fy, cx, cy, out)
         cur = out
     return cur
+
+
+def _is_str(value: Any, *allowed: str) -> bool:
+    return isinstance(value, str) and value in allowed
+
+
+def fused_plus(base: str, depth: Any, K: Any, depth_scale: float | None,
+               estimator_options: dict[str, Any],
+               module_options: dict[str, Any]) -> np.ndarray | None:
+    """``"<base>+"`` in one fused pass where one exists (3F2N with its FD kernel and the
+    metric mean or max curvature with the cross selection); None otherwise.
+
+    Same results as the estimator followed by :func:`discontinuity_discrimination`
+    (``tests/test_ddm_fused.py``), about twice as fast: the 3F2N normals and the curvature
+    never leave the cache.
+    """
+    if base != "3f2n" or set(estimator_options) - {"kernel", "kernel_size", "aggregate"}:
+        return None
+    ks = estimator_options.get("kernel_size", 3)
+    agg = estimator_options.get("aggregate", "median")
+    if not (_is_str(estimator_options.get("kernel", "fd"), "fd") and type(ks) is int
+            and ks == 3 and _is_str(agg, "median", "mean")):
+        return None
+    defaults = {p.name: p.default for p in
+                inspect.signature(discontinuity_discrimination).parameters.values()
+                if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name != "depth_scale"}
+    o = _options(**{**defaults, **module_options})
+    if not (o["curvature"] in ("mean", "max") and o["derivatives"] == "inverse-depth"
+            and o["slope"] == "min" and o["footprint"] == "pixel"
+            and o["selection"] == "curvature" and o["neighbourhood"] == "cross"):
+        return None
+    z, cam = prepare(depth, K, depth_scale)
+    n0, k = fused_3f2n_plus(z, cam.fx, cam.fy, cam.cx, cam.cy, mode=("median", "mean").index(agg),
+                            use_max=o["curvature"] == "max", self_weight=o["self_weight"],
+                            want_curvature=o["crf"])
+    return _refine(z, cam.fx, cam.fy, cam.cx, cam.cy, None, n0, k, o)

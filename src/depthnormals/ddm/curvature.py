@@ -59,7 +59,7 @@ import numpy as np
 
 from .._parallel import run_rows
 from .._validate import check_choice
-from ..estimators._common import prepare
+from ..estimators._common import prepare, row_dtype
 
 __all__ = ["CURVATURES", "DERIVATIVES", "FOOTPRINTS", "SLOPES", "depth_curvature"]
 
@@ -183,53 +183,87 @@ def _pixel_value(z0, zl, zr, zt, zb, a_off, b_off, fx, fy, kind, inverse, minslo
     return 0.25 * (a + b + c + d)
 
 
+def row_constants(dtype: np.dtype, fx: float, fy: float) -> np.ndarray:
+    """Constants of :func:`mean_max_row` in the dtype the row pass runs in."""
+    return np.array([0.5, 1.0, np.inf, 0.0, 2.0, 0.25, _R2, fx, fy], dtype=dtype)
+
+
 @nb.njit(**_SCA)
-def _mean_max_row(zp, zc, zn, Dp, Dc, Dn, b_off, fx, fy, cx, use_max, inverse, minslope, out):
+def mean_max_row(zp, zc, zn, Rp, Rc, Rn, acol, b_off, k, use_max, inverse, minslope, out):
     """Branch-free "mean" / "max" (pixel footprint) over the interior of one row.
 
-    ``Dp, Dc, Dn``: inverse depth of the three rows. Same algebra as :func:`_four`, with
-    divisions shared (one reciprocal per line and one for both diagonal terms).
+    Runs in the dtype of ``zc`` (``k``: :func:`row_constants`; ``acol[u] = u - cx``, ``b_off =
+    v - cy``). ``Rp, Rc, Rn``: 1 / z of the three rows. Same algebra as :func:`_four`, with
+    divisions shared (one reciprocal per line and one for both diagonal terms) and the
+    inverse-depth numerator written ``z^2 ((z - z_l) / z_l + (z - z_r) / z_r)``, which has no
+    cancellation of large terms (float32 keeps it accurate).
     """
-    w = zc.size
+    half = k[0]
+    one = k[1]
+    inf = k[2]
+    zero = k[3]
+    two = k[4]
+    quarter = k[5]
+    r2 = k[6]
+    fx = k[7]
+    fy = k[8]
     fx2 = fx * fx
     fy2 = fy * fy
+    w = zc.size
     for u in range(1, w - 1):
-        z0 = np.float64(zc[u])
-        zl = np.float64(zc[u - 1])
-        zr = np.float64(zc[u + 1])
-        zt = np.float64(zp[u])
-        zb = np.float64(zn[u])
+        z0 = zc[u]
+        zl = zc[u - 1]
+        zr = zc[u + 1]
+        zt = zp[u]
+        zb = zn[u]
         oku = (zl == zl) & (zr == zr) & (z0 == z0)
         okv = (zt == zt) & (zb == zb) & (z0 == z0)
-        zu, nu_l, a = _line(zl, z0, zr, u - cx, False, minslope)
-        zv, nv_l, b = _line(zt, z0, zb, b_off, False, minslope)
-        z3 = z0 * z0 * z0
-        nu_i = z3 * (Dc[u - 1] - 2.0 * Dc[u] + Dc[u + 1])
-        nv_i = z3 * (Dp[u] - 2.0 * Dc[u] + Dn[u])
+        # first derivatives: half central difference, or the smallest one-sided one
+        zu = half * (zr - zl)
+        gl = z0 - zl
+        gr = zr - z0
+        zu = gl if (minslope & (abs(gl) < abs(zu))) else zu
+        zu = gr if (minslope & (abs(gr) < abs(zu))) else zu
+        zv = half * (zb - zt)
+        gt = z0 - zt
+        gb = zb - z0
+        zv = gt if (minslope & (abs(gt) < abs(zv))) else zv
+        zv = gb if (minslope & (abs(gb) < abs(zv))) else zv
+        a = z0 + acol[u] * zu
+        b = z0 + b_off * zv
+        zz = z0 * z0
+        nu_i = zz * (gl * Rc[u - 1] - gr * Rc[u + 1])
+        nv_i = zz * (gt * Rp[u] - gb * Rn[u])
+        nu_l = two * zu * zu - z0 * (gr - gl)
+        nv_l = two * zv * zv - z0 * (gb - gt)
         nu = nu_i if inverse else nu_l
         nv = nv_i if inverse else nv_l
-        ku = fx2 * abs(nu) / _pow15(a * a + fx2 * zu * zu)
-        kv = fy2 * abs(nv) / _pow15(b * b + fy2 * zv * zv)
-        ia = 1.0 / a
-        ib = 1.0 / b
+        su = a * a + fx2 * zu * zu
+        sv = b * b + fy2 * zv * zv
+        ku = fx2 * abs(nu) / (su * np.sqrt(su))
+        kv = fy2 * abs(nv) / (sv * np.sqrt(sv))
+        ia = one / a
+        ib = one / b
         c_x = fx * zu * ia
         c_y = fy * zv * ib
         c_xx = -fx2 * nu * (ia * ia * ia)
         c_yy = -fy2 * nv * (ib * ib * ib)
-        cg = _R2 * (c_x + c_y)
-        cb = _R2 * (c_x - c_y)
-        pg = _pow15(1.0 + cg * cg)
-        pb = _pow15(1.0 + cb * cb)
-        r = 1.0 / (pg * pb)
-        kg = abs(_R2 * (c_xx + c_yy)) * pb * r
-        kb = abs(_R2 * (c_xx - c_yy)) * pg * r
-        okd = oku & okv & (a != 0.0) & (b != 0.0)
-        ku = ku if oku else _INF
-        kv = kv if okv else _INF
-        kg = kg if okd else _INF
-        kb = kb if okd else _INF
+        cg = r2 * (c_x + c_y)
+        cb = r2 * (c_x - c_y)
+        tg = one + cg * cg
+        tb = one + cb * cb
+        pg = tg * np.sqrt(tg)
+        pb = tb * np.sqrt(tb)
+        r = one / (pg * pb)
+        kg = abs(r2 * (c_xx + c_yy)) * pb * r
+        kb = abs(r2 * (c_xx - c_yy)) * pg * r
+        okd = oku & okv & (a != zero) & (b != zero)
+        ku = ku if oku else inf
+        kv = kv if okv else inf
+        kg = kg if okd else inf
+        kb = kb if okd else inf
         mx = max(max(ku, kv), max(kg, kb))
-        mn = 0.25 * (ku + kv + kg + kb)
+        mn = quarter * (ku + kv + kg + kb)
         out[u] = mx if use_max else mn
 
 
@@ -258,26 +292,29 @@ def _other_row(zp, zc, zn, b_off, fx, fy, cx, kind, inverse, minslope, out):
 
 
 @nb.njit(**_JIT)
-def _curvature_rows(v0, v1, z, fx, fy, cx, cy, kind, inverse, minslope, out):
+def _curvature_rows(v0, v1, z, fx, fy, cx, cy, kind, inverse, minslope, k, acol, bcol, out):
     """Curvature at the pixel itself (pixel footprint) for the rows [v0, v1)."""
     h, w = z.shape
-    D = np.empty((3, w))  # rolling inverse depth of rows v-1, v, v+1 (slot = row % 3)
+    R = np.empty((3, w), dtype=z.dtype)  # rolling 1 / z of rows v-1, v, v+1 (slot = row % 3)
+    row = np.empty(w, dtype=z.dtype)
+    one = k[1]
     if kind <= 1:
         for r in range(max(v0 - 1, 0), min(v0 + 1, h)):
             for u in range(w):
-                D[r % 3, u] = 1.0 / np.float64(z[r, u])
+                R[r % 3, u] = one / z[r, u]
     for v in range(v0, v1):
         b_off = v - cy
         if kind <= 1 and v + 1 < h:
-            Dn = D[(v + 1) % 3]
+            Rn = R[(v + 1) % 3]
             zn = z[v + 1]
             for u in range(w):
-                Dn[u] = 1.0 / np.float64(zn[u])
+                Rn[u] = one / zn[u]
         if 0 < v < h - 1 and w > 2:
             if kind <= 1:
-                _mean_max_row(z[v - 1], z[v], z[v + 1], D[(v - 1) % 3], D[v % 3],
-                              D[(v + 1) % 3], b_off, fx, fy, cx, kind == 1, inverse, minslope,
-                              out[v])
+                mean_max_row(z[v - 1], z[v], z[v + 1], R[(v - 1) % 3], R[v % 3], R[(v + 1) % 3],
+                             acol, bcol[v], k, kind == 1, inverse, minslope, row)
+                for u in range(1, w - 1):
+                    out[v, u] = row[u]
             elif kind == 4:
                 _pixel_mean_row(z[v - 1], z[v], z[v + 1], out[v])
             else:
@@ -362,8 +399,13 @@ def curvature_map(z: np.ndarray, fx: float, fy: float, cx: float, cy: float, kin
         _directional(z, fx, fy, cx, cy, inverse, minslope, ku, kv, kg, kb)
         run_rows(_aggregate_rows, h, z, ku, kv, kg, kb, kind == "max", out)
     else:
-        run_rows(_curvature_rows, h, z, float(fx), float(fy), float(cx), float(cy),
-                 KIND_CODES[kind], inverse, minslope, out)
+        zr = row_dtype(z, fx, fy, cx, cy) if kind in ("mean", "max") else z
+        with np.errstate(over="ignore", under="ignore"):  # row_dtype checked the range
+            k = row_constants(zr.dtype, fx, fy)
+            acol = (np.arange(w) - cx).astype(zr.dtype)
+            bcol = (np.arange(h) - cy).astype(zr.dtype)
+        run_rows(_curvature_rows, h, zr, float(fx), float(fy), float(cx), float(cy),
+                 KIND_CODES[kind], inverse, minslope, k, acol, bcol, out)
     return out
 
 

@@ -17,7 +17,8 @@ from .._parallel import run_rows
 from .._validate import check_depth
 from ..camera import Intrinsics, as_intrinsics
 
-__all__ = ["NEIGHBOURS8", "finish", "new_output", "nz_candidates", "prepare", "store_normal"]
+__all__ = ["FLOAT32_RANGE", "NEIGHBOURS8", "finish", "new_output", "nz_candidates", "oriented_unit",
+           "prepare", "row_dtype", "store_normal"]
 
 
 #: Offsets (dv, du) of the 8-neighbourhood, row by row.
@@ -35,9 +36,58 @@ def prepare(depth: Any, K: Any, depth_scale: float | None) -> tuple[np.ndarray, 
     return z, cam
 
 
+@nb.njit(cache=True, error_model="numpy", nogil=True)
+def _depth_range(z):
+    lo = np.inf
+    hi = -np.inf
+    for v in range(z.shape[0]):
+        for u in range(z.shape[1]):
+            x = np.float64(z[v, u])
+            lo = x if x < lo else lo  # NaN (invalid) compares false: ignored
+            hi = x if x > hi else hi
+    return lo, hi
+
+
+#: Depth range (any unit) and intrinsics magnitude in which the float32 row passes keep full
+#: float32 precision: squares of normal components and curvature terms stay normal numbers.
+FLOAT32_RANGE = (2.0 ** -24, 2.0 ** 24)
+
+
+def row_dtype(z: np.ndarray, fx: float = 1.0, fy: float = 1.0, cx: float = 0.0,
+              cy: float = 0.0) -> np.ndarray:
+    """``z`` as the vectorised row passes should see it: float32 stays float32 (8 lanes per
+    vector) when its finite depths and the intrinsics lie in :data:`FLOAT32_RANGE`;
+    anything else is promoted to float64 (a copy).
+    """
+    if z.dtype == np.float64:
+        return z
+    lo, hi = _depth_range(z)
+    big = FLOAT32_RANGE[1]
+    fits = (FLOAT32_RANGE[0] <= lo and hi <= big and FLOAT32_RANGE[0] <= min(abs(fx), abs(fy))
+            and max(abs(fx), abs(fy), abs(cx) + z.shape[1], abs(cy) + z.shape[0]) <= big)
+    if not (lo <= hi):  # no valid pixel at all
+        fits = True
+    return z if fits else z.astype(np.float64)
+
+
 def new_output(shape: tuple[int, int]) -> np.ndarray:
     """An (H, W, 3) float32 array filled with NaN."""
     return np.full((shape[0], shape[1], 3), np.nan, dtype=np.float32)
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def oriented_unit(nx, ny, nz, px, py, pz):
+    """(nx, ny, nz) normalised and oriented toward the camera (dot with the point < 0).
+
+    NaN (all three) when the vector is not finite or has zero length.
+    """
+    norm = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if not (norm > 0.0) or not math.isfinite(norm):
+        return np.nan, np.nan, np.nan
+    inv = 1.0 / norm
+    if nx * px + ny * py + nz * pz > 0.0:
+        inv = -inv
+    return nx * inv, ny * inv, nz * inv
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -46,18 +96,10 @@ def store_normal(out, v, u, nx, ny, nz, px, py, pz):
 
     Writes NaN when the vector is not finite or has zero length.
     """
-    norm = math.sqrt(nx * nx + ny * ny + nz * nz)
-    if not (norm > 0.0) or not math.isfinite(norm):
-        out[v, u, 0] = np.nan
-        out[v, u, 1] = np.nan
-        out[v, u, 2] = np.nan
-        return
-    inv = 1.0 / norm
-    if nx * px + ny * py + nz * pz > 0.0:
-        inv = -inv
-    out[v, u, 0] = nx * inv
-    out[v, u, 1] = ny * inv
-    out[v, u, 2] = nz * inv
+    x, y, t = oriented_unit(nx, ny, nz, px, py, pz)
+    out[v, u, 0] = x
+    out[v, u, 1] = y
+    out[v, u, 2] = t
 
 
 @nb.njit(cache=True, error_model="numpy", nogil=True)

@@ -10,7 +10,7 @@ import numpy as np
 from .._parallel import run_rows
 from .._validate import check_choice
 from ..registry import register
-from ._common import NEIGHBOURS8, nz_candidates, prepare, store_normal
+from ._common import NEIGHBOURS8, nz_candidates, oriented_unit, prepare, row_dtype
 from ._stencils import KERNELS, gradient_kernels, roberts_gradient, stencil_derivative
 
 __all__ = ["AGGREGATES", "three_filters_to_normal"]
@@ -89,21 +89,23 @@ def median8_pair(a0, a1, a2, a3, a4, a5, a6, a7):
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _generic_pixel(z, D, recip, v, u, fx, fy, cx, cy, deriv, smooth, roberts, mode, nb_off, cand,
-                   out):
+def generic_normal(z, D, recip, v, u, fx, fy, cx, cy, deriv, smooth, roberts, mode, nb_off,
+                   cand):
+    """The 3F2N normal of one pixel by the general (validity-aware, any kernel) path.
+
+    ``D`` is inverse depth (or depth with ``recip``); returns a unit, camera-facing float64
+    normal, or NaNs where no estimate is possible.
+    """
     zq = np.float64(z[v, u])
+    if not (zq == zq):
+        return np.nan, np.nan, np.nan
     if roberts:
         gu, gv = roberts_gradient(D, v, u)
     else:
         gu = stencil_derivative(D, v, u, 0, 1, deriv, smooth, recip)
         gv = stencil_derivative(D, v, u, 1, 0, deriv, smooth, recip)
-    xq = (u - cx) * zq / fx
-    yq = (v - cy) * zq / fy
     if not (gu == gu and gv == gv):
-        out[v, u, 0] = np.nan
-        out[v, u, 1] = np.nan
-        out[v, u, 2] = np.nan
-        return
+        return np.nan, np.nan, np.nan
     nx = fx * gu
     ny = fy * gv
     n = nz_candidates(z, v, u, nx, ny, fx, fy, cx, cy, nb_off, cand)
@@ -113,7 +115,7 @@ def _generic_pixel(z, D, recip, v, u, fx, fy, cx, cy, deriv, smooth, roberts, mo
         nz = -1.0
     else:
         nz = central_tendency(cand, n, mode)
-    store_normal(out, v, u, nx, ny, nz, xq, yq, zq)
+    return oriented_unit(nx, ny, nz, (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
 
 
 # no-NaN/no-inf assumptions are never allowed: NaN marks invalid depth
@@ -239,45 +241,82 @@ def _fd_row(zp, zc, zn, Rp, Rc, Rn, pl, pc, pr, cl, cc, cr, eh, acol, b, c, mode
         flag[u] = not (chk == chk and nrm > zero and nrm < pinf and zq == zq)
 
 
+@nb.njit(cache=True, error_model="numpy")
+def row_normals(v, z, D, recip, R, c, acol, bcol, fx, fy, cx, cy, deriv, smooth, roberts, mode,
+                fast_fd, nb_off, steps, prev, bx, by, bz, flag, cand):
+    """The 3F2N normals of row ``v`` into ``bx, by, bz`` (every column; NaN where none).
+
+    With ``fast_fd`` the interior goes through :func:`_fd_row` and only flagged pixels take
+    :func:`generic_normal`. ``steps`` (7, W) holds the reciprocal depth steps, ``prev`` which
+    of its down-step sets belongs to row ``v - 1`` (-1: none yet; rows must then come in
+    order). Returns the new ``prev``.
+    """
+    h, w = z.shape
+    flag[:] = True
+    if fast_fd and 0 < v < h - 1 and w > 2:
+        one = c[1]
+        if prev < 0:
+            prev = 0
+            _down_edges(z[v - 1], z[v], steps[0], steps[1], steps[2], one)
+        cur = 3 - prev
+        _down_edges(z[v], z[v + 1], steps[cur], steps[cur + 1], steps[cur + 2], one)
+        _right_edges(z[v], steps[6], one)
+        _fd_row(z[v - 1], z[v], z[v + 1], R[v - 1], R[v], R[v + 1], steps[prev],
+                steps[prev + 1], steps[prev + 2], steps[cur], steps[cur + 1], steps[cur + 2],
+                steps[6], acol, bcol[v], c, mode, bx, by, bz, flag)
+        prev = cur
+    for u in range(w):
+        if flag[u]:
+            x, y, t = generic_normal(z, D, recip, v, u, fx, fy, cx, cy, deriv, smooth, roberts,
+                                     mode, nb_off, cand)
+            bx[u] = x
+            by[u] = y
+            bz[u] = t
+    return prev
+
+
 @nb.njit(cache=True, error_model="numpy", nogil=True)
 def _threefn_rows(v0, v1, z, D, recip, R, c, acol, bcol, fx, fy, cx, cy, deriv, smooth, roberts,
                   mode, fast_fd, nb_off, out):
-    h, w = z.shape
+    w = z.shape[1]
     cand = np.empty(8)
     flag = np.empty(w, dtype=np.bool_)
-    if fast_fd and w > 2 and h > 2:
-        bx = np.empty(w, dtype=z.dtype)
-        by = np.empty(w, dtype=z.dtype)
-        bz = np.empty(w, dtype=z.dtype)
-        steps = np.empty((7, w), dtype=z.dtype)  # two sets of down steps, one of right steps
-        one = c[1]
-        first = max(v0, 1)
-        prev = 0
-        _down_edges(z[first - 1], z[first], steps[0], steps[1], steps[2], one)
+    bx = np.empty(w, dtype=z.dtype)
+    by = np.empty(w, dtype=z.dtype)
+    bz = np.empty(w, dtype=z.dtype)
+    steps = np.empty((7, w), dtype=z.dtype)  # two sets of down steps, one of right steps
+    prev = -1
     for v in range(v0, v1):
-        flag[:] = True
-        if fast_fd and 0 < v < h - 1 and w > 2:
-            cur = 3 - prev
-            _down_edges(z[v], z[v + 1], steps[cur], steps[cur + 1], steps[cur + 2], one)
-            _right_edges(z[v], steps[6], one)
-            _fd_row(z[v - 1], z[v], z[v + 1], R[v - 1], R[v], R[v + 1], steps[prev],
-                    steps[prev + 1], steps[prev + 2], steps[cur], steps[cur + 1], steps[cur + 2],
-                    steps[6], acol, bcol[v], c, mode, bx, by, bz, flag)
-            prev = cur
-            for u in range(1, w - 1):
-                out[v, u, 0] = bx[u]
-                out[v, u, 1] = by[u]
-                out[v, u, 2] = bz[u]
+        prev = row_normals(v, z, D, recip, R, c, acol, bcol, fx, fy, cx, cy, deriv, smooth,
+                           roberts, mode, fast_fd, nb_off, steps, prev, bx, by, bz, flag, cand)
         for u in range(w):
-            if not flag[u]:
-                continue
-            if not (z[v, u] == z[v, u]):
-                out[v, u, 0] = np.nan
-                out[v, u, 1] = np.nan
-                out[v, u, 2] = np.nan
-                continue
-            _generic_pixel(z, D, recip, v, u, fx, fy, cx, cy, deriv, smooth, roberts, mode,
-                           nb_off, cand, out)
+            out[v, u, 0] = bx[u]
+            out[v, u, 1] = by[u]
+            out[v, u, 2] = bz[u]
+
+
+def row_setup(z: np.ndarray, fx: float, fy: float, cx: float, cy: float, fast_fd: bool):
+    """Arrays the row kernels need: (z, D, R, c, acol, bcol) for :func:`row_normals`.
+
+    The FD row pass runs in the dtype of z (float32 sensor depth: 8 lanes per vector) unless
+    depth or intrinsics lie outside ``_common.FLOAT32_RANGE`` (then z is promoted to float64);
+    the general path (borders, invalid neighbours) samples 1 / z in float64.
+    """
+    h, w = z.shape
+    if fast_fd:
+        z = row_dtype(z, fx, fy, cx, cy)
+    with np.errstate(over="ignore", under="ignore"):  # only the general path when they do
+        c = np.array([0.5, 1.0, np.inf, -np.inf, 0.0, fx, fy, np.finfo(z.dtype).max],
+                     dtype=z.dtype)
+        acol = (np.arange(w) - cx).astype(z.dtype)
+        bcol = (np.arange(h) - cy).astype(z.dtype)
+    if fast_fd:
+        R = np.divide(1, z, dtype=z.dtype)
+        D = z
+    else:
+        R = z[:1, :1]
+        D = np.divide(1.0, z, dtype=np.float64)
+    return z, D, R, c, acol, bcol
 
 
 @register("3f2n")
@@ -358,29 +397,9 @@ def three_filters_to_normal(depth: Any, K: Any, *, kernel: str = "fd", kernel_si
         deriv, smooth = np.zeros(1), np.ones(1)
     else:
         deriv, smooth = gradient_kernels(kernel, kernel_size)
-    h, w = z.shape
-    out = np.empty((h, w, 3), dtype=np.float32)
+    out = np.empty((*z.shape, 3), dtype=np.float32)
     fast_fd = kernel == "fd" and kernel_size == 3 and mode in (0, 1)
-    # the FD row pass runs in the dtype of z (float32 sensor depth: 8 lanes per vector) unless
-    # the intrinsics do not fit it; the general path (borders, invalid neighbours) samples
-    # 1 / z in float64
-    with np.errstate(over="ignore", under="ignore"):
-        c = np.array([0.5, 1.0, np.inf, -np.inf, 0.0, cam.fx, cam.fy], dtype=z.dtype)
-        acol = (np.arange(w) - cam.cx).astype(z.dtype)
-        bcol = (np.arange(h) - cam.cy).astype(z.dtype)
-    if fast_fd and not (np.isfinite(c[5:]).all() and np.isfinite(acol).all()
-                        and np.isfinite(bcol).all()):
-        z = z.astype(np.float64)
-        c = c.astype(np.float64)
-        c[5:] = (cam.fx, cam.fy)
-        acol = np.arange(w) - cam.cx
-        bcol = np.arange(h) - cam.cy
-    if fast_fd:
-        R = np.divide(1, z, dtype=z.dtype)
-        D = z
-    else:
-        R = z[:1, :1]
-        D = np.divide(1.0, z, dtype=np.float64)
-    run_rows(_threefn_rows, h, z, D, fast_fd, R, c, acol, bcol, cam.fx, cam.fy, cam.cx, cam.cy,
-             deriv, smooth, kernel == "roberts", mode, fast_fd, NEIGHBOURS8, out)
+    z, D, R, c, acol, bcol = row_setup(z, cam.fx, cam.fy, cam.cx, cam.cy, fast_fd)
+    run_rows(_threefn_rows, z.shape[0], z, D, fast_fd, R, c, acol, bcol, cam.fx, cam.fy, cam.cx,
+             cam.cy, deriv, smooth, kernel == "roberts", mode, fast_fd, NEIGHBOURS8, out)
     return out

@@ -1,0 +1,140 @@
+"""3F2N+ in one pass: 3F2N, depth curvature and the cross selection fused row by row.
+
+The separate stages of :func:`depthnormals.ddm.discontinuity_discrimination` write and re-read
+two full-size maps (the 3F2N normals, interleaved, and the curvature) and select with strided
+loads. Here every row of 3F2N normals and of curvature goes into small planar ring buffers
+(three rows, padded by one NaN/inf column each side) and row ``v - 1`` is selected as soon as
+row ``v`` exists, so all of it stays in L1 and every inner loop vectorises (8 lanes for
+float32 depth). Same kernels, same arithmetic as the separate stages: the results are equal
+(``tests/test_ddm_fused.py``).
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from .._parallel import run_rows
+from ..estimators._common import NEIGHBOURS8
+from ..estimators.threefn import row_normals, row_setup
+from .crf import clamp_key, take_smaller
+from .curvature import mean_max_row, row_constants
+
+__all__ = ["cross_select_row", "fused_3f2n_plus"]
+
+_FASTMATH = {"nsz", "contract", "arcp"}
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _cand(kr, xr, big, inf):
+    return clamp_key(kr, big) if xr == xr else inf
+
+
+@nb.njit(cache=True, error_model="numpy", fastmath=_FASTMATH)
+def cross_select_row(zc, px, py, pz, qx, qy, qz, nx, ny, nz, kp, kq, kn, acol, b, c, selfw, bx,
+                     by, bz):
+    """The cross selection (self, up, left, right, down) of one row from padded planar rows.
+
+    ``px, py, pz`` / ``qx, qy, qz`` / ``nx, ny, nz``: the normal components of the rows above,
+    at and below, ``kp, kq, kn`` their curvatures, all indexed ``u + 1`` (columns 0 and
+    W + 1 are padding: NaN normals). A candidate is valid where its normal is (3F2N gives NaN
+    at invalid depth); the rule is :func:`depthnormals.ddm.crf.select_min`'s (clamped keys,
+    compared in float64, self first with its key times ``selfw``, first strictly smallest
+    wins). The winner is renormalised and turned toward the camera; NaN where none or where
+    ``zc`` is invalid. ``c``: :func:`depthnormals.estimators.threefn.row_setup`'s constants.
+    """
+    one = c[1]
+    inf = c[2]
+    zero = c[4]
+    big = c[7]
+    nan = zero * inf
+    ifx = one / c[5]
+    bfy = b / c[6]
+    for u in range(bx.size):
+        i = u + 1
+        x = qx[i]
+        y = qy[i]
+        t = qz[i]
+        k = np.float64(_cand(kq[i], x, big, inf)) * selfw
+        xr = px[i]
+        k, x, y, t = take_smaller(_cand(kp[i], xr, big, inf), k, xr, py[i], pz[i], x, y, t)
+        xr = qx[i - 1]
+        k, x, y, t = take_smaller(_cand(kq[i - 1], xr, big, inf), k, xr, qy[i - 1], qz[i - 1],
+                                  x, y, t)
+        xr = qx[i + 1]
+        k, x, y, t = take_smaller(_cand(kq[i + 1], xr, big, inf), k, xr, qy[i + 1], qz[i + 1],
+                                  x, y, t)
+        xr = nx[i]
+        k, x, y, t = take_smaller(_cand(kn[i], xr, big, inf), k, xr, ny[i], nz[i], x, y, t)
+        nrm = np.sqrt(x * x + y * y + t * t)
+        inv = one / nrm
+        inv = -inv if x * (acol[u] * ifx) + y * bfy + t > zero else inv
+        inv = inv if zc[u] == zc[u] else nan
+        bx[u] = x * inv
+        by[u] = y * inv
+        bz[u] = t * inv
+
+
+@nb.njit(cache=True, error_model="numpy", nogil=True)
+def _plus_rows(v0, v1, z, R, c, acol, bcol, fx, fy, cx, cy, mode, kc, use_max, selfw, deriv,
+               smooth, nb_off, out, kout, want_k):
+    h, w = z.shape
+    nbuf = np.full((4, 3, w + 2), np.nan, dtype=z.dtype)  # rows r % 3; slot 3: outside image
+    kbuf = np.full((4, w + 2), np.inf, dtype=z.dtype)
+    steps = np.empty((7, w), dtype=z.dtype)
+    flag = np.empty(w, dtype=np.bool_)
+    cand = np.empty(8)
+    bx = np.empty(w, dtype=z.dtype)
+    by = np.empty(w, dtype=z.dtype)
+    bz = np.empty(w, dtype=z.dtype)
+    prev = -1
+    for r in range(max(v0 - 1, 0), min(v1 + 1, h) + 1):
+        if r < h:
+            s = r % 3
+            prev = row_normals(r, z, z, True, R, c, acol, bcol, fx, fy, cx, cy, deriv, smooth,
+                               False, mode, True, nb_off, steps, prev, nbuf[s, 0, 1:w + 1],
+                               nbuf[s, 1, 1:w + 1], nbuf[s, 2, 1:w + 1], flag, cand)
+            kb = kbuf[s]
+            kb[:] = np.inf
+            if 0 < r < h - 1 and w > 2:
+                mean_max_row(z[r - 1], z[r], z[r + 1], R[r - 1], R[r], R[r + 1], acol, bcol[r],
+                             kc, use_max, True, True, kb[1:w + 1])
+                kb[1] = np.inf
+                kb[w] = np.inf
+            if want_k and v0 <= r < v1:
+                for u in range(w):
+                    kout[r, u] = kb[u + 1]
+        q = r - 1
+        if q < v0 or q >= v1:
+            continue
+        a = (q - 1) % 3 if q > 0 else 3
+        b = r % 3 if r < h else 3
+        cur = q % 3
+        cross_select_row(z[q], nbuf[a, 0], nbuf[a, 1], nbuf[a, 2], nbuf[cur, 0], nbuf[cur, 1],
+                         nbuf[cur, 2], nbuf[b, 0], nbuf[b, 1], nbuf[b, 2], kbuf[a], kbuf[cur],
+                         kbuf[b], acol, bcol[q], c, selfw, bx, by, bz)
+        for u in range(w):
+            out[q, u, 0] = bx[u]
+            out[q, u, 1] = by[u]
+            out[q, u, 2] = bz[u]
+
+
+def fused_3f2n_plus(z: np.ndarray, fx: float, fy: float, cx: float, cy: float, *, mode: int,
+                    use_max: bool, self_weight: float,
+                    want_curvature: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    """3F2N (FD, 3x3, ``mode`` 0 median / 1 mean) + the metric mean (or max) curvature +
+    the cross selection on prepared depth ``z`` (NaN at invalid pixels).
+
+    Returns the selected normals (H, W, 3) float32 and, with ``want_curvature``, the
+    curvature map (H, W) float64 (for the CRF), as :func:`curvature_map` gives it.
+    """
+    h, w = z.shape
+    z, _, R, c, acol, bcol = row_setup(z, fx, fy, cx, cy, True)
+    with np.errstate(over="ignore", under="ignore"):  # row_setup checked the range
+        kc = row_constants(z.dtype, fx, fy)
+    out = np.empty((h, w, 3), dtype=np.float32)
+    kout = np.empty((h, w) if want_curvature else (1, 1), dtype=np.float64)
+    run_rows(_plus_rows, h, z, R, c, acol, bcol, float(fx), float(fy), float(cx), float(cy),
+             mode, kc, use_max, float(self_weight), np.array([-0.5, 0.0, 0.5]), np.ones(1),
+             NEIGHBOURS8, out, kout, want_curvature)
+    return out, (kout if want_curvature else None)

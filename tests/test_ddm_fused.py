@@ -1,0 +1,123 @@
+"""The fused 3F2N+ pass (ddm/fused.py) equals 3F2N followed by the separate module, and the
+CRF's vectorised skip test is exact (a brute-force minimisation agrees)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import depthnormals as dn
+from depthnormals.analytic import make_scene
+from depthnormals.ddm import fused_plus
+from depthnormals.ddm.correlation import kendall_map
+from depthnormals.ddm.crf import CROSS, crf_step
+from depthnormals.estimators._common import prepare
+
+K = (131.25, 131.25, 79.5, 59.5)
+
+
+@pytest.fixture(scope="module")
+def rough():
+    """Curved surfaces, occlusions, noise and holes (every branch of the row passes)."""
+    rng = np.random.default_rng(3)
+    r = make_scene("sphere-before-wall").render(K=K, shape=(120, 160))
+    z = r.depth.copy()
+    z += rng.normal(0.0, 0.001, z.shape) * (z > 0)
+    z[rng.random(z.shape) < 0.03] = 0.0
+    z[40:47, 60:70] = 0.0
+    return z
+
+
+def _agree(a, b, *, max_deg=1e-3):
+    na, nb_ = np.isnan(a[..., 0]), np.isnan(b[..., 0])
+    assert (na == nb_).all()
+    err = dn.angular_error(a, b)[~na]
+    # a sign may differ only where the normal is perpendicular to the ray
+    X = dn.backproject(np.ones(a.shape[:2]), K)[~na]  # ray directions
+    cos_ray = np.abs(np.einsum("ij,ij->i", b[~na].astype(np.float64), X)) / np.linalg.norm(X, axis=1)
+    flipped = err > 90
+    assert (cos_ray[flipped] < 0.05).all()
+    assert err[~flipped].max() < max_deg
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("opts", [
+    {},
+    {"aggregate": "mean"},
+    {"curvature": "max"},
+    {"self_weight": 1.0},
+    {"correlation": "kendall"},
+    {"correlation": "kendall", "crf": True},
+    {"correlation": "kendall-prose", "crf": True, "lambda_": 0.05, "iterations": 2},
+])
+def test_fused_equals_estimator_then_module(rough, dtype, opts):
+    z = rough.astype(dtype)
+    own = {k: v for k, v in opts.items() if k == "aggregate"}
+    rest = {k: v for k, v in opts.items() if k != "aggregate"}
+    fused = fused_plus("3f2n", z, K, None, own, rest)
+    assert fused is not None
+    assert np.array_equal(fused, dn.estimate_normals(z, K, method="3f2n+", **opts), equal_nan=True)
+    base = dn.three_filters_to_normal(z, K, **own)
+    separate = dn.discontinuity_discrimination(base, z, K, **rest)
+    _agree(fused, separate)
+
+
+@pytest.mark.parametrize("own,rest", [
+    ({"kernel": "sobel"}, {}), ({"kernel_size": 5}, {}), ({"aggregate": "trimean"}, {}),
+    ({}, {"curvature": "pixel-mean"}), ({}, {"neighbourhood": "square"}),
+    ({}, {"slope": "central"}), ({}, {"footprint": "neighbours"}),
+    ({}, {"selection": "plane-fit"}), ({}, {"derivatives": "depth"}),
+])
+def test_fused_path_declines_what_it_does_not_implement(rough, own, rest):
+    assert fused_plus("3f2n", rough, K, None, own, rest) is None
+    assert fused_plus("d2nt", rough, K, None, {}, {}) is None
+
+
+def test_fused_path_validates_module_options(rough):
+    with pytest.raises(ValueError, match="self_weight"):
+        fused_plus("3f2n", rough, K, None, {}, {"self_weight": 0.0})
+
+
+def _brute_force_crf(z, n0, kq, tau, sigma, lam):
+    """The CRF energy minimised over the cross candidates with no shortcut (Python)."""
+    h, w = z.shape
+    out = np.full_like(n0, np.nan)
+    ok = np.isfinite(z) & np.isfinite(n0[..., 0])
+    for v in range(h):
+        for u in range(w):
+            if not np.isfinite(z[v, u]):
+                continue
+            nbs = [(v + a, u + b) for a in (-1, 0, 1) for b in (-1, 0, 1)
+                   if (a or b) and 0 <= v + a < h and 0 <= u + b < w and ok[v + a, u + b]]
+            k = kq[v, u] if kq[v, u] < 1e6 else 1e6
+            best, pick = None, None
+            for dv, du in CROSS:
+                r, c = v + dv, u + du
+                if not (0 <= r < h and 0 <= c < w and ok[r, c]):
+                    continue
+                cand = n0[r, c].astype(np.float64)
+                e = sigma * np.linalg.norm(cand - n0[v, u]) if ok[v, u] else 0.0
+                e += lam * k * sum((1.0 - tau[p]) * np.linalg.norm(n0[p] - cand) for p in nbs)
+                if best is None or e < best:
+                    best, pick = e, cand
+            if pick is not None:
+                out[v, u] = pick / np.linalg.norm(pick)
+    return out
+
+
+@pytest.mark.parametrize("lam", [0.002, 0.05])
+def test_crf_skip_test_is_exact(rough, lam):
+    z, cam = prepare(rough[30:60, 40:80], K, None)
+    Ks = (cam.fx, cam.fy, cam.cx, cam.cy)
+    n0 = dn.estimate_normals(z, Ks, method="3f2n+")
+    kq = dn.ddm.depth_curvature(z, Ks) * z
+    tau = kendall_map(z)
+    out = np.empty_like(n0)
+    crf_step(z, n0, n0, kq, 1, tau, 1.0, lam, CROSS, *Ks, out)
+    ref = _brute_force_crf(z, n0, kq, tau, 1.0, lam)
+    changed = np.nansum(np.abs(ref - n0), axis=-1) > 1e-6
+    assert changed.sum() > 5  # the CRF does something on this patch
+    # orientation: the brute force does not re-orient; compare folded
+    err = dn.angular_error(out, ref, folded=True)
+    assert np.nanmax(err) < 1e-3
+    assert (np.isnan(out[..., 0]) == np.isnan(ref[..., 0])).all()
