@@ -50,7 +50,10 @@ def main() -> None:
     print(f"{'case':<34}{'CPU ms':>9}{'x FALS':>8}{'wall ms':>9}{'min ms':>9}")
     print(f"{'opencv FALS w=5 (apply only)':<34}{ref[0]:9.2f}{1.0:8.2f}{ref[1]:9.2f}{ref[2]:9.2f}")
     cases = [("3f2n", {}), ("d2nt", {"variant": "basic"}), ("d2nt", {}), ("3f2n+", {}),
-             ("3f2n+", {"correlation": "kendall", "crf": True}), ("fals", {}), ("sda-sne", {}),
+             ("3f2n+", {"consistency": None}),
+             ("3f2n+", {"consistency": None, "correlation": "kendall", "crf": True}),
+             ("3f2n+", {"correlation": "kendall", "crf": True}), ("d2nt+", {}), ("fals", {}),
+             ("sda-sne", {}),
              ("plane-svd", {}), ("plane-pca", {}), ("vector-svd", {}), ("area-weighted", {}),
              ("angle-weighted", {})]
     for method, opts in cases:

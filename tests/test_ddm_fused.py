@@ -49,6 +49,8 @@ def _agree(a, b, *, max_deg=1e-3):
     {"correlation": "kendall"},
     {"correlation": "kendall", "crf": True},
     {"correlation": "kendall-prose", "crf": True, "lambda_": 0.05, "iterations": 2},
+    {"consistency": None},
+    {"consistency": None, "correlation": "kendall", "crf": True},
 ])
 def test_fused_equals_estimator_then_module(rough, dtype, opts):
     z = rough.astype(dtype)

@@ -25,11 +25,13 @@ TABLE2_ROWS = (
     ("3F2N+ w/ Kendall", {"curvature": "none", "correlation": "kendall", "crf": False}),
     ("3F2N+ w/ Kendall (prose: argmax)",
      {"curvature": "none", "correlation": "kendall-prose", "crf": False}),
-    ("3F2N+ mean curvature (paper: plain arg-min)", {"self_weight": 1.0}),
-    ("3F2N+ mean curvature (default, self_weight 0.8)", {}),
-    ("3F2N+ mean + Kendall + CRF", {"correlation": "kendall", "crf": True}),
-    ("3F2N+ mean + Pearson + CRF", {"correlation": "pearson", "crf": True}),
-    ("3F2N+ mean + CRF (no correlation)", {"correlation": "none", "crf": True}),
+    ("3F2N+ mean curvature (paper: plain arg-min)", {"self_weight": 1.0, "consistency": None}),
+    ("3F2N+ mean curvature, self_weight 0.8", {"consistency": None}),
+    ("3F2N+ mean curvature (default: + consistency)", {}),
+    ("3F2N+ mean + Kendall + CRF", {"correlation": "kendall", "crf": True, "consistency": None}),
+    ("3F2N+ mean + Pearson + CRF", {"correlation": "pearson", "crf": True, "consistency": None}),
+    ("3F2N+ mean + CRF (no correlation)",
+     {"correlation": "none", "crf": True, "consistency": None}),
 )
 
 
@@ -110,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
                     for curv in TABLE1_CURVATURES:
                         # the paper's selection: plain arg-min, the pixel winning ties
                         n = discontinuity_discrimination(base, fr.depth, fr.K, curvature=curv,
-                                                         self_weight=1.0)
+                                                         self_weight=1.0, consistency=None)
                         label = f"{agg:<13} {ker:<8} {curv}"
                         results.setdefault(label, {}).setdefault(g, []).append(_score(n, fr))
         else:

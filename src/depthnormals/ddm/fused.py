@@ -17,70 +17,18 @@ import numpy as np
 from .._parallel import run_rows
 from ..estimators._common import NEIGHBOURS8
 from ..estimators.threefn import row_normals, row_setup
-from .crf import clamp_key, take_smaller
+from .crf import cross_select_row
 from .curvature import mean_max_row, row_constants
 
-__all__ = ["cross_select_row", "fused_3f2n_plus"]
-
-_FASTMATH = {"nsz", "contract", "arcp"}
-
-
-@nb.njit(cache=True, error_model="numpy", inline="always")
-def _cand(kr, xr, big, inf):
-    return clamp_key(kr, big) if xr == xr else inf
-
-
-@nb.njit(cache=True, error_model="numpy", fastmath=_FASTMATH)
-def cross_select_row(zc, px, py, pz, qx, qy, qz, nx, ny, nz, kp, kq, kn, acol, b, c, selfw, bx,
-                     by, bz):
-    """The cross selection (self, up, left, right, down) of one row from padded planar rows.
-
-    ``px, py, pz`` / ``qx, qy, qz`` / ``nx, ny, nz``: the normal components of the rows above,
-    at and below, ``kp, kq, kn`` their curvatures, all indexed ``u + 1`` (columns 0 and
-    W + 1 are padding: NaN normals). A candidate is valid where its normal is (3F2N gives NaN
-    at invalid depth); the rule is :func:`depthnormals.ddm.crf.select_min`'s (clamped keys,
-    compared in float64, self first with its key times ``selfw``, first strictly smallest
-    wins). The winner is renormalised and turned toward the camera; NaN where none or where
-    ``zc`` is invalid. ``c``: :func:`depthnormals.estimators.threefn.row_setup`'s constants.
-    """
-    one = c[1]
-    inf = c[2]
-    zero = c[4]
-    big = c[7]
-    nan = zero * inf
-    ifx = one / c[5]
-    bfy = b / c[6]
-    for u in range(bx.size):
-        i = u + 1
-        x = qx[i]
-        y = qy[i]
-        t = qz[i]
-        k = np.float64(_cand(kq[i], x, big, inf)) * selfw
-        xr = px[i]
-        k, x, y, t = take_smaller(_cand(kp[i], xr, big, inf), k, xr, py[i], pz[i], x, y, t)
-        xr = qx[i - 1]
-        k, x, y, t = take_smaller(_cand(kq[i - 1], xr, big, inf), k, xr, qy[i - 1], qz[i - 1],
-                                  x, y, t)
-        xr = qx[i + 1]
-        k, x, y, t = take_smaller(_cand(kq[i + 1], xr, big, inf), k, xr, qy[i + 1], qz[i + 1],
-                                  x, y, t)
-        xr = nx[i]
-        k, x, y, t = take_smaller(_cand(kn[i], xr, big, inf), k, xr, ny[i], nz[i], x, y, t)
-        nrm = np.sqrt(x * x + y * y + t * t)
-        inv = one / nrm
-        inv = -inv if x * (acol[u] * ifx) + y * bfy + t > zero else inv
-        inv = inv if zc[u] == zc[u] else nan
-        bx[u] = x * inv
-        by[u] = y * inv
-        bz[u] = t * inv
-
+__all__ = ["fused_3f2n_plus"]
 
 @nb.njit(cache=True, error_model="numpy", nogil=True)
-def _plus_rows(v0, v1, z, R, c, acol, bcol, fx, fy, cx, cy, mode, kc, use_max, selfw, deriv,
-               smooth, nb_off, out, kout, want_k):
+def _plus_rows(v0, v1, z, R, c, acol, bcol, fx, fy, cx, cy, mode, kc, use_max, selfw, eps,
+               deriv, smooth, nb_off, out, kout, want_k):
     h, w = z.shape
     nbuf = np.full((4, 3, w + 2), np.nan, dtype=z.dtype)  # rows r % 3; slot 3: outside image
     kbuf = np.full((4, w + 2), np.inf, dtype=z.dtype)
+    zbuf = np.full((4, w + 2), np.nan, dtype=z.dtype)
     steps = np.empty((7, w), dtype=z.dtype)
     flag = np.empty(w, dtype=np.bool_)
     cand = np.empty(8)
@@ -91,6 +39,9 @@ def _plus_rows(v0, v1, z, R, c, acol, bcol, fx, fy, cx, cy, mode, kc, use_max, s
     for r in range(max(v0 - 1, 0), min(v1 + 1, h) + 1):
         if r < h:
             s = r % 3
+            zr = zbuf[s]
+            for u in range(w):
+                zr[u + 1] = z[r, u]
             prev = row_normals(r, z, z, True, R, c, acol, bcol, fx, fy, cx, cy, deriv, smooth,
                                False, mode, True, nb_off, steps, prev, nbuf[s, 0, 1:w + 1],
                                nbuf[s, 1, 1:w + 1], nbuf[s, 2, 1:w + 1], flag, cand)
@@ -110,9 +61,10 @@ def _plus_rows(v0, v1, z, R, c, acol, bcol, fx, fy, cx, cy, mode, kc, use_max, s
         a = (q - 1) % 3 if q > 0 else 3
         b = r % 3 if r < h else 3
         cur = q % 3
-        cross_select_row(z[q], nbuf[a, 0], nbuf[a, 1], nbuf[a, 2], nbuf[cur, 0], nbuf[cur, 1],
-                         nbuf[cur, 2], nbuf[b, 0], nbuf[b, 1], nbuf[b, 2], kbuf[a], kbuf[cur],
-                         kbuf[b], acol, bcol[q], c, selfw, bx, by, bz)
+        cross_select_row(zbuf[a], zbuf[cur], zbuf[b], nbuf[a, 0], nbuf[a, 1], nbuf[a, 2],
+                         nbuf[cur, 0], nbuf[cur, 1], nbuf[cur, 2], nbuf[b, 0], nbuf[b, 1],
+                         nbuf[b, 2], kbuf[a], kbuf[cur], kbuf[b], acol, bcol[q], c, selfw, eps,
+                         bx, by, bz)
         for u in range(w):
             out[q, u, 0] = bx[u]
             out[q, u, 1] = by[u]
@@ -120,7 +72,7 @@ def _plus_rows(v0, v1, z, R, c, acol, bcol, fx, fy, cx, cy, mode, kc, use_max, s
 
 
 def fused_3f2n_plus(z: np.ndarray, fx: float, fy: float, cx: float, cy: float, *, mode: int,
-                    use_max: bool, self_weight: float,
+                    use_max: bool, self_weight: float, consistency: float | None,
                     want_curvature: bool) -> tuple[np.ndarray, np.ndarray | None]:
     """3F2N (FD, 3x3, ``mode`` 0 median / 1 mean) + the metric mean (or max) curvature +
     the cross selection on prepared depth ``z`` (NaN at invalid pixels).
@@ -135,6 +87,7 @@ def fused_3f2n_plus(z: np.ndarray, fx: float, fy: float, cx: float, cy: float, *
     out = np.empty((h, w, 3), dtype=np.float32)
     kout = np.empty((h, w) if want_curvature else (1, 1), dtype=np.float64)
     run_rows(_plus_rows, h, z, R, c, acol, bcol, float(fx), float(fy), float(cx), float(cy),
-             mode, kc, use_max, float(self_weight), np.array([-0.5, 0.0, 0.5]), np.ones(1),
+             mode, kc, use_max, float(self_weight),
+             -1.0 if consistency is None else float(consistency), np.array([-0.5, 0.0, 0.5]), np.ones(1),
              NEIGHBOURS8, out, kout, want_curvature)
     return out, (kout if want_curvature else None)
