@@ -77,7 +77,8 @@ def discontinuity_discrimination(
         Intrinsics in pixels, 0-based pixel centres.
     curvature : {"mean", "max", "normal", "gauss", "pixel-mean", "none"}, default "mean"
         Depth curvature (:func:`depthnormals.ddm.depth_curvature`). ``"pixel-mean"`` with
-        ``correlation="none"`` reproduces the authors' public code.
+        ``self_weight=1.0, consistency=None`` and no correlation reproduces the authors'
+        public code.
     correlation : {"kendall", "kendall-prose", "pearson", "none"}, default "none"
         ``"kendall"``: tau high = discontinuity (``s = 1 - tau``, the CRF formula's reading);
         ``"kendall-prose"``: tau high = same plane (``s = tau``, the prose's arg-max);
