@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from .._validate import check_choice, check_normals
-from ..estimators._common import prepare
+from ..estimators._common import prepare, row_dtype
 from .correlation import CORRELATIONS, kendall_map
 from .crf import CROSS, SQUARE, crf_step, select_min
 from .curvature import CURVATURES, DERIVATIVES, FOOTPRINTS, SLOPES, curvature_map
@@ -185,6 +185,7 @@ def discontinuity_discrimination(
                     selection=selection, fit_radius=fit_radius, self_weight=self_weight,
                     consistency=consistency)
     z, cam = prepare(depth, K, depth_scale)
+    z = row_dtype(z, cam.fx, cam.fy, cam.cx, cam.cy)
     n_in = check_normals(normals, shape=z.shape)
     n_in = np.ascontiguousarray(n_in, dtype=np.float32)
     return _refine(z, cam.fx, cam.fy, cam.cx, cam.cy, n_in, None, None, opts)
@@ -234,7 +235,8 @@ def _options(*, curvature: str, correlation: str, crf: bool, sigma: float, lambd
 def _refine(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
             n_in: np.ndarray | None, n0: np.ndarray | None, k: np.ndarray | None,
             o: dict[str, Any]) -> np.ndarray:
-    """The three stages on prepared depth; ``n0``/``k`` given: stage 1 already done."""
+    """The three stages on prepared depth (as ``row_dtype`` gives it); ``n0``/``k`` given:
+    stage 1 already done."""
     curvature, correlation, crf = o["curvature"], o["correlation"], o["crf"]
     offs = CROSS if o["neighbourhood"] == "cross" else SQUARE
     if n0 is None:
@@ -306,6 +308,7 @@ def fused_plus(base: str, depth: Any, K: Any, depth_scale: float | None,
             and o["selection"] == "curvature" and o["neighbourhood"] == "cross"):
         return None
     z, cam = prepare(depth, K, depth_scale)
+    z = row_dtype(z, cam.fx, cam.fy, cam.cx, cam.cy)
     n0, k = fused_3f2n_plus(z, cam.fx, cam.fy, cam.cx, cam.cy, mode=("median", "mean").index(agg),
                             use_max=o["curvature"] == "max", self_weight=o["self_weight"],
                             consistency=o["consistency"], want_curvature=o["crf"])

@@ -14,11 +14,11 @@ import numba as nb
 import numpy as np
 
 from .._parallel import run_rows
-from ..estimators._common import row_dtype, store_normal
+from ..estimators._common import row_arrays, store_normal
 from .correlation import pearson_pair
 
 __all__ = ["CROSS", "SQUARE", "clamp_key", "crf_step", "cross_select_row", "inconsistency",
-           "inconsistency_pq", "select_min"]
+           "inconsistency_pq", "select_min", "select_ring_row"]
 
 # candidate offsets (dv, du), self first (self wins ties). CROSS is the public code's order:
 # self, up, left, right, down.
@@ -317,18 +317,25 @@ def _select_rows(v0, v1, z, normals, key, offs, cross, fx, fy, cx, cy, c, acol, 
     for r in range(max(v0 - 1, 0), min(v1 + 1, h)):
         fill_padded(z[r], normals[r], key[r], zb[r % 3], nb3[r % 3], kb[r % 3])
         for q in range(r - 1, r + 1 if r == h - 1 else r):  # the last row has none below
-            if q < v0 or q >= v1:
-                continue
-            a = (q - 1) % 3 if q > 0 else 3
-            s = (q + 1) % 3 if q + 1 < h else 3
-            m = q % 3
-            cross_select_row(zb[a], zb[m], zb[s], nb3[a, 0], nb3[a, 1], nb3[a, 2], nb3[m, 0],
-                             nb3[m, 1], nb3[m, 2], nb3[s, 0], nb3[s, 1], nb3[s, 2], kb[a], kb[m],
-                             kb[s], acol, bcol[q], c, selfw, eps, bx, by, bz)
-            for u in range(w):
-                out[q, u, 0] = bx[u]
-                out[q, u, 1] = by[u]
-                out[q, u, 2] = bz[u]
+            if v0 <= q < v1:
+                select_ring_row(q, h, zb, nb3, kb, acol, bcol, c, selfw, eps, bx, by, bz, out)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def select_ring_row(q, h, zb, nb3, kb, acol, bcol, c, selfw, eps, bx, by, bz, out):
+    """:func:`cross_select_row` for row ``q`` from ring buffers (slot ``row % 3``, slot 3:
+    outside the image) of padded depth ``zb``, planar normals ``nb3`` and keys ``kb``, once
+    rows q - 1 .. q + 1 are in them; the result goes into ``out[q]``."""
+    a = (q - 1) % 3 if q > 0 else 3
+    s = (q + 1) % 3 if q + 1 < h else 3
+    m = q % 3
+    cross_select_row(zb[a], zb[m], zb[s], nb3[a, 0], nb3[a, 1], nb3[a, 2], nb3[m, 0], nb3[m, 1],
+                     nb3[m, 2], nb3[s, 0], nb3[s, 1], nb3[s, 2], kb[a], kb[m], kb[s], acol,
+                     bcol[q], c, selfw, eps, bx, by, bz)
+    for u in range(bx.size):
+        out[q, u, 0] = bx[u]
+        out[q, u, 1] = by[u]
+        out[q, u, 2] = bz[u]
 
 
 def select_min(z, normals, key, offs, fx, fy, cx, cy, out, self_weight=1.0, consistency=None):
@@ -338,18 +345,13 @@ def select_min(z, normals, key, offs, fx, fy, cx, cy, out, self_weight=1.0, cons
     winning ties; < 1: a neighbour must be clearly better). ``consistency`` (footprints^2,
     None: off): a neighbour is taken only if its normal fits the pixel's depth about as well
     as the pixel's own (:func:`inconsistency`). Writes every pixel of ``out`` (NaN at
-    invalid depth and where no candidate exists).
+    invalid depth and where no candidate exists). ``z`` as
+    :func:`depthnormals.estimators._common.row_dtype` gives it.
     """
     cross = offs.shape == CROSS.shape and bool((offs == CROSS).all())
-    h, w = z.shape
-    z = row_dtype(z, fx, fy, cx, cy)  # float32 rows only where depth and intrinsics fit
-    with np.errstate(under="ignore"):
-        c = np.array([0.5, 1.0, np.inf, -np.inf, 0.0, fx, fy, np.finfo(z.dtype).max],
-                     dtype=z.dtype)
-        acol = (np.arange(w) - cx).astype(z.dtype)
-        bcol = (np.arange(h) - cy).astype(z.dtype)
+    c, acol, bcol = row_arrays(z, fx, fy, cx, cy)
     eps = -1.0 if consistency is None else float(consistency)
-    run_rows(_select_rows, h, z, normals, key, offs, cross, float(fx), float(fy), float(cx),
+    run_rows(_select_rows, z.shape[0], z, normals, key, offs, cross, float(fx), float(fy), float(cx),
              float(cy), c, acol, bcol, float(self_weight), eps, out)
 
 

@@ -59,7 +59,7 @@ import numpy as np
 
 from .._parallel import run_rows
 from .._validate import check_choice
-from ..estimators._common import prepare, row_dtype
+from ..estimators._common import prepare, row_arrays, row_dtype
 
 __all__ = ["CURVATURES", "DERIVATIVES", "FOOTPRINTS", "SLOPES", "depth_curvature"]
 
@@ -386,7 +386,8 @@ def _aggregate_rows(v0, v1, z, ku, kv, kg, kb, use_max, out):
 def curvature_map(z: np.ndarray, fx: float, fy: float, cx: float, cy: float, kind: str,
                   derivatives: str = "inverse-depth", slope: str = "min",
                   footprint: str = "pixel") -> np.ndarray:
-    """Curvature map of prepared depth ``z`` (NaN at invalid pixels); see the module notes."""
+    """Curvature map of prepared depth ``z`` (NaN at invalid pixels, as
+    :func:`depthnormals.estimators._common.row_dtype` gives it); see the module notes."""
     h, w = z.shape
     out = np.empty((h, w), dtype=np.float64)
     inverse = derivatives == "inverse-depth"
@@ -399,12 +400,10 @@ def curvature_map(z: np.ndarray, fx: float, fy: float, cx: float, cy: float, kin
         _directional(z, fx, fy, cx, cy, inverse, minslope, ku, kv, kg, kb)
         run_rows(_aggregate_rows, h, z, ku, kv, kg, kb, kind == "max", out)
     else:
-        zr = row_dtype(z, fx, fy, cx, cy) if kind in ("mean", "max") else z
-        with np.errstate(over="ignore", under="ignore"):  # row_dtype checked the range
-            k = row_constants(zr.dtype, fx, fy)
-            acol = (np.arange(w) - cx).astype(zr.dtype)
-            bcol = (np.arange(h) - cy).astype(zr.dtype)
-        run_rows(_curvature_rows, h, zr, float(fx), float(fy), float(cx), float(cy),
+        with np.errstate(over="ignore", under="ignore"):  # only where the rows are not used
+            k = row_constants(z.dtype, fx, fy)
+        _, acol, bcol = row_arrays(z, fx, fy, cx, cy)
+        run_rows(_curvature_rows, h, z, float(fx), float(fy), float(cx), float(cy),
                  KIND_CODES[kind], inverse, minslope, k, acol, bcol, out)
     return out
 
@@ -467,5 +466,6 @@ def depth_curvature(depth: Any, K: Any, *, kind: str = "mean",
     check_choice(slope, "slope", SLOPES)
     check_choice(footprint, "footprint", FOOTPRINTS)
     z, cam = prepare(depth, K, depth_scale)
+    z = row_dtype(z, cam.fx, cam.fy, cam.cx, cam.cy)
     return curvature_map(z, cam.fx, cam.fy, cam.cx, cam.cy, kind, derivatives, slope,
                          footprint)

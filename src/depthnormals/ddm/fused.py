@@ -17,10 +17,11 @@ import numpy as np
 from .._parallel import run_rows
 from ..estimators._common import NEIGHBOURS8
 from ..estimators.threefn import row_normals, row_setup
-from .crf import cross_select_row
+from .crf import select_ring_row
 from .curvature import mean_max_row, row_constants
 
 __all__ = ["fused_3f2n_plus"]
+
 
 @nb.njit(cache=True, error_model="numpy", nogil=True)
 def _plus_rows(v0, v1, z, R, c, acol, bcol, fx, fy, cx, cy, mode, kc, use_max, selfw, eps,
@@ -42,8 +43,8 @@ def _plus_rows(v0, v1, z, R, c, acol, bcol, fx, fy, cx, cy, mode, kc, use_max, s
             zr = zbuf[s]
             for u in range(w):
                 zr[u + 1] = z[r, u]
-            prev = row_normals(r, z, z, True, R, c, acol, bcol, fx, fy, cx, cy, deriv, smooth,
-                               False, mode, True, nb_off, steps, prev, nbuf[s, 0, 1:w + 1],
+            prev = row_normals(r, z, z, R, c, acol, bcol, fx, fy, cx, cy, deriv, smooth, False,
+                               mode, True, nb_off, steps, prev, nbuf[s, 0, 1:w + 1],
                                nbuf[s, 1, 1:w + 1], nbuf[s, 2, 1:w + 1], flag, cand)
             kb = kbuf[s]
             kb[:] = np.inf
@@ -55,33 +56,23 @@ def _plus_rows(v0, v1, z, R, c, acol, bcol, fx, fy, cx, cy, mode, kc, use_max, s
             if want_k and v0 <= r < v1:
                 for u in range(w):
                     kout[r, u] = kb[u + 1]
-        q = r - 1
-        if q < v0 or q >= v1:
-            continue
-        a = (q - 1) % 3 if q > 0 else 3
-        b = r % 3 if r < h else 3
-        cur = q % 3
-        cross_select_row(zbuf[a], zbuf[cur], zbuf[b], nbuf[a, 0], nbuf[a, 1], nbuf[a, 2],
-                         nbuf[cur, 0], nbuf[cur, 1], nbuf[cur, 2], nbuf[b, 0], nbuf[b, 1],
-                         nbuf[b, 2], kbuf[a], kbuf[cur], kbuf[b], acol, bcol[q], c, selfw, eps,
-                         bx, by, bz)
-        for u in range(w):
-            out[q, u, 0] = bx[u]
-            out[q, u, 1] = by[u]
-            out[q, u, 2] = bz[u]
+        if v0 <= r - 1 < v1:
+            select_ring_row(r - 1, h, zbuf, nbuf, kbuf, acol, bcol, c, selfw, eps, bx, by, bz,
+                            out)
 
 
 def fused_3f2n_plus(z: np.ndarray, fx: float, fy: float, cx: float, cy: float, *, mode: int,
                     use_max: bool, self_weight: float, consistency: float | None,
                     want_curvature: bool) -> tuple[np.ndarray, np.ndarray | None]:
     """3F2N (FD, 3x3, ``mode`` 0 median / 1 mean) + the metric mean (or max) curvature +
-    the cross selection on prepared depth ``z`` (NaN at invalid pixels).
+    the cross selection on prepared depth ``z`` (NaN at invalid pixels), as
+    :func:`depthnormals.estimators._common.row_dtype` gives it.
 
     Returns the selected normals (H, W, 3) float32 and, with ``want_curvature``, the
     curvature map (H, W) float64 (for the CRF), as :func:`curvature_map` gives it.
     """
     h, w = z.shape
-    z, _, R, c, acol, bcol = row_setup(z, fx, fy, cx, cy, True)
+    _, R, c, acol, bcol = row_setup(z, fx, fy, cx, cy, True)
     with np.errstate(over="ignore", under="ignore"):  # row_setup checked the range
         kc = row_constants(z.dtype, fx, fy)
     out = np.empty((h, w, 3), dtype=np.float32)

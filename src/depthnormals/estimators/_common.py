@@ -18,7 +18,7 @@ from .._validate import check_depth
 from ..camera import Intrinsics, as_intrinsics
 
 __all__ = ["FLOAT32_RANGE", "NEIGHBOURS8", "finish", "new_output", "nz_candidates", "oriented_unit",
-           "prepare", "row_dtype", "store_normal"]
+           "prepare", "row_arrays", "row_dtype", "store_normal"]
 
 
 #: Offsets (dv, du) of the 8-neighbourhood, row by row.
@@ -68,6 +68,23 @@ def row_dtype(z: np.ndarray, fx: float = 1.0, fy: float = 1.0, cx: float = 0.0,
     if not (lo <= hi):  # no valid pixel at all
         fits = True
     return z if fits else z.astype(np.float64)
+
+
+def row_arrays(z: np.ndarray, fx: float, fy: float, cx: float,
+               cy: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Typed inputs of the row kernels, in the dtype of ``z`` (as :func:`row_dtype` gives it).
+
+    ``c = (0.5, 1, inf, -inf, 0, fx, fy, the dtype's largest float)``, ``acol[u] = u - cx``,
+    ``bcol[v] = v - cy``. Casting huge or tiny intrinsics to float32 only happens where the
+    row passes are not used, so overflow and underflow are silent here.
+    """
+    h, w = z.shape
+    with np.errstate(over="ignore", under="ignore"):
+        c = np.array([0.5, 1.0, np.inf, -np.inf, 0.0, fx, fy, np.finfo(z.dtype).max],
+                     dtype=z.dtype)
+        acol = (np.arange(w) - cx).astype(z.dtype)
+        bcol = (np.arange(h) - cy).astype(z.dtype)
+    return c, acol, bcol
 
 
 def new_output(shape: tuple[int, int]) -> np.ndarray:

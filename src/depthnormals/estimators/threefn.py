@@ -10,7 +10,7 @@ import numpy as np
 from .._parallel import run_rows
 from .._validate import check_choice
 from ..registry import register
-from ._common import NEIGHBOURS8, nz_candidates, oriented_unit, prepare, row_dtype
+from ._common import NEIGHBOURS8, nz_candidates, oriented_unit, prepare, row_arrays, row_dtype
 from ._stencils import KERNELS, gradient_kernels, roberts_gradient, stencil_derivative
 
 __all__ = ["AGGREGATES", "three_filters_to_normal"]
@@ -242,12 +242,13 @@ def _fd_row(zp, zc, zn, Rp, Rc, Rn, pl, pc, pr, cl, cc, cr, eh, acol, b, c, mode
 
 
 @nb.njit(cache=True, error_model="numpy")
-def row_normals(v, z, D, recip, R, c, acol, bcol, fx, fy, cx, cy, deriv, smooth, roberts, mode,
-                fast_fd, nb_off, steps, prev, bx, by, bz, flag, cand):
+def row_normals(v, z, D, R, c, acol, bcol, fx, fy, cx, cy, deriv, smooth, roberts, mode, fast_fd,
+                nb_off, steps, prev, bx, by, bz, flag, cand):
     """The 3F2N normals of row ``v`` into ``bx, by, bz`` (every column; NaN where none).
 
     With ``fast_fd`` the interior goes through :func:`_fd_row` and only flagged pixels take
-    :func:`generic_normal`. ``steps`` (7, W) holds the reciprocal depth steps, ``prev`` which
+    :func:`generic_normal`, which then samples ``1 / D`` (``D`` is the depth itself, see
+    :func:`row_setup`). ``steps`` (7, W) holds the reciprocal depth steps, ``prev`` which
     of its down-step sets belongs to row ``v - 1`` (-1: none yet; rows must then come in
     order). Returns the new ``prev``.
     """
@@ -267,8 +268,8 @@ def row_normals(v, z, D, recip, R, c, acol, bcol, fx, fy, cx, cy, deriv, smooth,
         prev = cur
     for u in range(w):
         if flag[u]:
-            x, y, t = generic_normal(z, D, recip, v, u, fx, fy, cx, cy, deriv, smooth, roberts,
-                                     mode, nb_off, cand)
+            x, y, t = generic_normal(z, D, fast_fd, v, u, fx, fy, cx, cy, deriv, smooth,
+                                     roberts, mode, nb_off, cand)
             bx[u] = x
             by[u] = y
             bz[u] = t
@@ -276,8 +277,8 @@ def row_normals(v, z, D, recip, R, c, acol, bcol, fx, fy, cx, cy, deriv, smooth,
 
 
 @nb.njit(cache=True, error_model="numpy", nogil=True)
-def _threefn_rows(v0, v1, z, D, recip, R, c, acol, bcol, fx, fy, cx, cy, deriv, smooth, roberts,
-                  mode, fast_fd, nb_off, out):
+def _threefn_rows(v0, v1, z, D, R, c, acol, bcol, fx, fy, cx, cy, deriv, smooth, roberts, mode,
+                  fast_fd, nb_off, out):
     w = z.shape[1]
     cand = np.empty(8)
     flag = np.empty(w, dtype=np.bool_)
@@ -287,8 +288,8 @@ def _threefn_rows(v0, v1, z, D, recip, R, c, acol, bcol, fx, fy, cx, cy, deriv, 
     steps = np.empty((7, w), dtype=z.dtype)  # two sets of down steps, one of right steps
     prev = -1
     for v in range(v0, v1):
-        prev = row_normals(v, z, D, recip, R, c, acol, bcol, fx, fy, cx, cy, deriv, smooth,
-                           roberts, mode, fast_fd, nb_off, steps, prev, bx, by, bz, flag, cand)
+        prev = row_normals(v, z, D, R, c, acol, bcol, fx, fy, cx, cy, deriv, smooth, roberts,
+                           mode, fast_fd, nb_off, steps, prev, bx, by, bz, flag, cand)
         for u in range(w):
             out[v, u, 0] = bx[u]
             out[v, u, 1] = by[u]
@@ -296,27 +297,16 @@ def _threefn_rows(v0, v1, z, D, recip, R, c, acol, bcol, fx, fy, cx, cy, deriv, 
 
 
 def row_setup(z: np.ndarray, fx: float, fy: float, cx: float, cy: float, fast_fd: bool):
-    """Arrays the row kernels need: (z, D, R, c, acol, bcol) for :func:`row_normals`.
+    """Arrays the row kernels need: (D, R, c, acol, bcol) for :func:`row_normals`.
 
-    The FD row pass runs in the dtype of z (float32 sensor depth: 8 lanes per vector) unless
-    depth or intrinsics lie outside ``_common.FLOAT32_RANGE`` (then z is promoted to float64);
-    the general path (borders, invalid neighbours) samples 1 / z in float64.
+    ``z`` as :func:`row_dtype` gives it: the FD row pass runs in its dtype (float32 sensor
+    depth: 8 lanes per vector). The general path (borders, invalid neighbours) samples 1 / z
+    in float64: from ``D = z`` itself with the FD pass, from ``D = 1 / z`` otherwise.
     """
-    h, w = z.shape
+    c, acol, bcol = row_arrays(z, fx, fy, cx, cy)
     if fast_fd:
-        z = row_dtype(z, fx, fy, cx, cy)
-    with np.errstate(over="ignore", under="ignore"):  # only the general path when they do
-        c = np.array([0.5, 1.0, np.inf, -np.inf, 0.0, fx, fy, np.finfo(z.dtype).max],
-                     dtype=z.dtype)
-        acol = (np.arange(w) - cx).astype(z.dtype)
-        bcol = (np.arange(h) - cy).astype(z.dtype)
-    if fast_fd:
-        R = np.divide(1, z, dtype=z.dtype)
-        D = z
-    else:
-        R = z[:1, :1]
-        D = np.divide(1.0, z, dtype=np.float64)
-    return z, D, R, c, acol, bcol
+        return z, np.divide(1, z, dtype=z.dtype), c, acol, bcol
+    return np.divide(1.0, z, dtype=np.float64), z[:1, :1], c, acol, bcol
 
 
 @register("3f2n")
@@ -399,7 +389,9 @@ def three_filters_to_normal(depth: Any, K: Any, *, kernel: str = "fd", kernel_si
         deriv, smooth = gradient_kernels(kernel, kernel_size)
     out = np.empty((*z.shape, 3), dtype=np.float32)
     fast_fd = kernel == "fd" and kernel_size == 3 and mode in (0, 1)
-    z, D, R, c, acol, bcol = row_setup(z, cam.fx, cam.fy, cam.cx, cam.cy, fast_fd)
-    run_rows(_threefn_rows, z.shape[0], z, D, fast_fd, R, c, acol, bcol, cam.fx, cam.fy, cam.cx,
-             cam.cy, deriv, smooth, kernel == "roberts", mode, fast_fd, NEIGHBOURS8, out)
+    if fast_fd:
+        z = row_dtype(z, cam.fx, cam.fy, cam.cx, cam.cy)
+    D, R, c, acol, bcol = row_setup(z, cam.fx, cam.fy, cam.cx, cam.cy, fast_fd)
+    run_rows(_threefn_rows, z.shape[0], z, D, R, c, acol, bcol, cam.fx, cam.fy, cam.cx, cam.cy,
+             deriv, smooth, kernel == "roberts", mode, fast_fd, NEIGHBOURS8, out)
     return out
