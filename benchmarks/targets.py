@@ -18,16 +18,23 @@ from depthnormals.analytic import make_scene
 from depthnormals.commands.bench import machine
 
 
-def _measure(fn, repeats):
-    fn()
-    fn()
-    cpu, wall = [], []
-    for _ in range(repeats):
-        t0, c0 = time.perf_counter(), time.thread_time()
+def _measure_all(fns, repeats):
+    """Thread CPU and wall time of every case, interleaved round-robin (load on the shared
+    machine hits every case alike, so the ratios hold even when the absolute times move):
+    (median CPU ms, median wall ms, min wall ms) per case."""
+    for fn in fns:
         fn()
-        cpu.append(time.thread_time() - c0)
-        wall.append(time.perf_counter() - t0)
-    return 1e3 * float(np.median(cpu)), 1e3 * float(np.median(wall)), 1e3 * float(np.min(wall))
+        fn()
+    cpu = [[] for _ in fns]
+    wall = [[] for _ in fns]
+    for _ in range(repeats):
+        for j, fn in enumerate(fns):
+            t0, c0 = time.perf_counter(), time.thread_time()
+            fn()
+            cpu[j].append(time.thread_time() - c0)
+            wall[j].append(time.perf_counter() - t0)
+    return [(1e3 * float(np.median(c)), 1e3 * float(np.median(t)), 1e3 * float(np.min(t)))
+            for c, t in zip(cpu, wall, strict=True)]
 
 
 def main() -> None:
@@ -45,10 +52,8 @@ def main() -> None:
     fals = cv2.rgbd.RgbdNormals_create(480, 640, cv2.CV_32F, K, 5,
                                        cv2.rgbd.RgbdNormals_RGBD_NORMALS_METHOD_FALS)
     points = cv2.rgbd.depthTo3d(depth, K)
-    print(f"machine: {machine()}; 640x480 {args.scene}, 1 thread, median of {args.repeats}")
-    ref = _measure(lambda: fals.apply(points), args.repeats)
-    print(f"{'case':<34}{'CPU ms':>9}{'x FALS':>8}{'wall ms':>9}{'min ms':>9}")
-    print(f"{'opencv FALS w=5 (apply only)':<34}{ref[0]:9.2f}{1.0:8.2f}{ref[1]:9.2f}{ref[2]:9.2f}")
+    print(f"machine: {machine()}; 640x480 {args.scene}, 1 thread, median of {args.repeats}, "
+          "cases interleaved")
     cases = [("3f2n", {}), ("d2nt", {"variant": "basic"}), ("d2nt", {}), ("3f2n+", {}),
              ("3f2n+", {"consistency": None}),
              ("3f2n+", {"consistency": None, "correlation": "kendall", "crf": True}),
@@ -56,11 +61,16 @@ def main() -> None:
              ("sda-sne", {}),
              ("plane-svd", {}), ("plane-pca", {}), ("vector-svd", {}), ("area-weighted", {}),
              ("angle-weighted", {})]
-    for method, opts in cases:
-        res = _measure(lambda m=method, o=opts: dn.estimate_normals(depth, K, method=m, **o), args.repeats)
+    fns = [lambda: fals.apply(points)]
+    fns += [lambda m=method, o=opts: dn.estimate_normals(depth, K, method=m, **o)
+            for method, opts in cases]
+    res = _measure_all(fns, args.repeats)
+    ref = res[0]
+    print(f"{'case':<34}{'CPU ms':>9}{'x FALS':>8}{'wall ms':>9}{'min ms':>9}")
+    print(f"{'opencv FALS w=5 (apply only)':<34}{ref[0]:9.2f}{1.0:8.2f}{ref[1]:9.2f}{ref[2]:9.2f}")
+    for (method, opts), r in zip(cases, res[1:], strict=True):
         label = method + ("" if not opts else " " + ",".join(f"{k}={v}" for k, v in opts.items()))
-        print(f"{label:<34}{res[0]:9.2f}{res[0] / ref[0]:8.2f}{res[1]:9.2f}{res[2]:9.2f}")
-
+        print(f"{label:<34}{r[0]:9.2f}{r[0] / ref[0]:8.2f}{r[1]:9.2f}{r[2]:9.2f}")
 
 if __name__ == "__main__":
     main()

@@ -11,7 +11,8 @@ from depthnormals.analytic import make_scene
 from depthnormals.ddm import fused_plus
 from depthnormals.ddm.correlation import kendall_map
 from depthnormals.ddm.crf import CROSS, crf_step
-from depthnormals.estimators._common import prepare
+from depthnormals.ddm.fused import fused_3f2n_plus
+from depthnormals.estimators._common import prepare, row_dtype
 
 K = (131.25, 131.25, 79.5, 59.5)
 
@@ -51,6 +52,10 @@ def _agree(a, b, *, max_deg=1e-3):
     {"correlation": "kendall-prose", "crf": True, "lambda_": 0.05, "iterations": 2},
     {"consistency": None},
     {"consistency": None, "correlation": "kendall", "crf": True},
+    {"consistency": None, "correlation": "kendall", "crf": True, "lambda_": 0.1},
+    {"curvature": "max", "correlation": "kendall-prose", "crf": True},
+    {"aggregate": "mean", "crf": True, "lambda_": 0.05},
+    {"correlation": "pearson", "crf": True},
 ])
 def test_fused_equals_estimator_then_module(rough, dtype, opts):
     z = rough.astype(dtype)
@@ -123,3 +128,26 @@ def test_crf_skip_test_is_exact(rough, lam):
     err = dn.angular_error(out, ref, folded=True)
     assert np.nanmax(err) < 1e-3
     assert (np.isnan(out[..., 0]) == np.isnan(ref[..., 0])).all()
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("sim_mode,lam", [(0, 0.05), (1, 0.01), (1, 0.2), (2, 0.05)])
+def test_fused_crf_equals_selection_then_crf_step(rough, dtype, sim_mode, lam):
+    """The CRF inside the fused pass is the generic ring CRF on the fused selection, bit for
+    bit, on one thread and on bands of rows."""
+    z, cam = prepare(rough.astype(dtype), K, None)
+    z = row_dtype(z, cam.fx, cam.fy, cam.cx, cam.cy)
+    Ks = (cam.fx, cam.fy, cam.cx, cam.cy)
+    opts = {"mode": 0, "use_max": False, "self_weight": 0.8, "consistency": None}
+    n0, k = fused_3f2n_plus(z, *Ks, want_curvature=True, **opts)
+    ref = np.empty_like(n0)
+    crf_step(z, n0, n0, k * z, sim_mode, np.zeros((1, 1)), 1.0, lam, CROSS, *Ks, ref)
+    assert (dn.angular_error(ref, n0) > 0.1).sum() > 20  # the CRF changes something here
+    threads = dn.get_num_threads()
+    try:
+        for n in (1, 3):
+            dn.set_num_threads(n)
+            out, _ = fused_3f2n_plus(z, *Ks, crf=sim_mode, lam=lam, **opts)
+            assert np.array_equal(out, ref, equal_nan=True)
+    finally:
+        dn.set_num_threads(threads)

@@ -156,10 +156,7 @@ def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
         ddm = importlib.import_module("depthnormals.ddm")
         info = _REGISTRY[method[:-1]]
         refine = ddm.discontinuity_discrimination
-        ddm_opts = tuple(
-            p.name for p in inspect.signature(refine).parameters.values()
-            if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name != "depth_scale"
-        )
+        ddm_opts = tuple(ddm.module_defaults())
         own, rest = _split_options(method, info, options, ddm_opts)
         fused = ddm.fused_plus(method[:-1], depth, K, depth_scale, own, rest)
         if fused is not None:

@@ -5,7 +5,7 @@
 ``depth_curvature`` and ``kendall_map`` expose the two discriminators.
 """
 
-from ._module import NEIGHBOURHOODS, discontinuity_discrimination, fused_plus
+from ._module import NEIGHBOURHOODS, discontinuity_discrimination, fused_plus, module_defaults
 from .correlation import CORRELATIONS, kendall_map
 from .curvature import CURVATURES, DERIVATIVES, depth_curvature
 
@@ -18,4 +18,5 @@ __all__ = [
     "discontinuity_discrimination",
     "fused_plus",
     "kendall_map",
+    "module_defaults",
 ]

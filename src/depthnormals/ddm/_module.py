@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import inspect
 import numbers
 from typing import Any
@@ -16,7 +17,7 @@ from .curvature import CURVATURES, DERIVATIVES, FOOTPRINTS, SLOPES, curvature_ma
 from .fused import fused_3f2n_plus
 from .planefit import plane_fit_select
 
-__all__ = ["NEIGHBOURHOODS", "discontinuity_discrimination", "fused_plus"]
+__all__ = ["NEIGHBOURHOODS", "discontinuity_discrimination", "fused_plus", "module_defaults"]
 
 NEIGHBOURHOODS = ("square", "cross")
 _CURV = (*CURVATURES, "none")
@@ -191,6 +192,9 @@ def discontinuity_discrimination(
     return _refine(z, cam.fx, cam.fy, cam.cx, cam.cy, n_in, None, None, opts)
 
 
+_SIM_MODES = {"none": 0, "kendall": 1, "kendall-prose": 2, "pearson": 3}  # crf_step's sim_mode
+
+
 def _options(*, curvature: str, correlation: str, crf: bool, sigma: float, lambda_: float,
              iterations: int, neighbourhood: str | None, derivatives: str, slope: str,
              footprint: str, selection: str, fit_radius: int, self_weight: float,
@@ -268,7 +272,7 @@ def _refine(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
         return n0
 
     # stage 3: the CRF, anchored at the stage-1 normals
-    mode = {"none": 0, "kendall": 1, "kendall-prose": 2, "pearson": 3}[correlation]
+    mode = _SIM_MODES[correlation]
     kq = k * z if curvature in ("mean", "max") else k
     cur = n0
     for _ in range(o["iterations"]):
@@ -276,6 +280,19 @@ def _refine(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
         crf_step(z, cur, n0, kq, mode, tau, o["sigma"], o["lam"], offs, fx, fy, cx, cy, out)
         cur = out
     return cur
+
+
+@functools.cache
+def _defaults() -> tuple[tuple[str, Any], ...]:
+    return tuple((p.name, p.default) for p in
+                 inspect.signature(discontinuity_discrimination).parameters.values()
+                 if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name != "depth_scale")
+
+
+def module_defaults() -> dict[str, Any]:
+    """The options of :func:`discontinuity_discrimination` (but ``depth_scale``) and their
+    defaults (read once from its signature)."""
+    return dict(_defaults())
 
 
 def _is_str(value: Any, *allowed: str) -> bool:
@@ -299,17 +316,22 @@ def fused_plus(base: str, depth: Any, K: Any, depth_scale: float | None,
     if not (_is_str(estimator_options.get("kernel", "fd"), "fd") and type(ks) is int
             and ks == 3 and _is_str(agg, "median", "mean")):
         return None
-    defaults = {p.name: p.default for p in
-                inspect.signature(discontinuity_discrimination).parameters.values()
-                if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name != "depth_scale"}
-    o = _options(**{**defaults, **module_options})
+    o = _options(**{**module_defaults(), **module_options})
     if not (o["curvature"] in ("mean", "max") and o["derivatives"] == "inverse-depth"
             and o["slope"] == "min" and o["footprint"] == "pixel"
             and o["selection"] == "curvature" and o["neighbourhood"] == "cross"):
         return None
     z, cam = prepare(depth, K, depth_scale)
     z = row_dtype(z, cam.fx, cam.fy, cam.cx, cam.cy)
-    n0, k = fused_3f2n_plus(z, cam.fx, cam.fy, cam.cx, cam.cy, mode=("median", "mean").index(agg),
+    agg_mode = ("median", "mean").index(agg)
+    sim_mode = _SIM_MODES[o["correlation"]]
+    if o["crf"] and o["iterations"] == 1 and sim_mode != 3:  # the CRF in the same pass
+        out, _ = fused_3f2n_plus(z, cam.fx, cam.fy, cam.cx, cam.cy, mode=agg_mode,
+                                 use_max=o["curvature"] == "max", self_weight=o["self_weight"],
+                                 consistency=o["consistency"], crf=sim_mode, sigma=o["sigma"],
+                                 lam=o["lam"])
+        return out
+    n0, k = fused_3f2n_plus(z, cam.fx, cam.fy, cam.cx, cam.cy, mode=agg_mode,
                             use_max=o["curvature"] == "max", self_weight=o["self_weight"],
                             consistency=o["consistency"], want_curvature=o["crf"])
     return _refine(z, cam.fx, cam.fy, cam.cx, cam.cy, None, n0, k, o)

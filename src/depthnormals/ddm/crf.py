@@ -16,6 +16,7 @@ import numpy as np
 from .._parallel import run_rows
 from ..estimators._common import row_arrays, store_normal
 from .correlation import pearson_pair
+from .crf_ring import crf_ring_row, ring_slots, scratch, sim_coefficients, similarity_row
 
 __all__ = ["CROSS", "SQUARE", "clamp_key", "crf_step", "cross_select_row", "inconsistency",
            "inconsistency_pq", "select_min", "select_ring_row"]
@@ -325,13 +326,16 @@ def _select_rows(v0, v1, z, normals, key, offs, cross, fx, fy, cx, cy, c, acol, 
 def select_ring_row(q, h, zb, nb3, kb, acol, bcol, c, selfw, eps, bx, by, bz, out):
     """:func:`cross_select_row` for row ``q`` from ring buffers (slot ``row % 3``, slot 3:
     outside the image) of padded depth ``zb``, planar normals ``nb3`` and keys ``kb``, once
-    rows q - 1 .. q + 1 are in them; the result goes into ``out[q]``."""
+    rows q - 1 .. q + 1 are in them; the result goes into ``bx, by, bz`` and (unless
+    ``out`` is None) ``out[q]``."""
     a = (q - 1) % 3 if q > 0 else 3
     s = (q + 1) % 3 if q + 1 < h else 3
     m = q % 3
     cross_select_row(zb[a], zb[m], zb[s], nb3[a, 0], nb3[a, 1], nb3[a, 2], nb3[m, 0], nb3[m, 1],
                      nb3[m, 2], nb3[s, 0], nb3[s, 1], nb3[s, 2], kb[a], kb[m], kb[s], acol,
                      bcol[q], c, selfw, eps, bx, by, bz)
+    if out is None:
+        return
     for u in range(bx.size):
         out[q, u, 0] = bx[u]
         out[q, u, 1] = by[u]
@@ -513,6 +517,44 @@ def _crf_rows(v0, v1, z, cur, anchor, anchored, kq, sim_mode, tau, sigma, lam, o
                        u, wi, nb, out)
 
 
+@nb.njit(**_JIT)
+def _crf_ring_rows(v0, v1, z, cur, anchor, anchored, kq, a, b, sigma, lam, fx, fy, cx, cy, out):
+    """The cross-candidate CRF of rows [v0, v1) through the ring kernels of
+    :mod:`depthnormals.ddm.crf_ring` (the fused 3F2N+ pipeline calls the same ones)."""
+    h, w = z.shape
+    zb = np.full((4, w + 2), np.nan, dtype=z.dtype)  # slot r % 3; slot 3: outside
+    sel = np.full((5, 3, w + 2), np.nan, dtype=np.float32)  # slot r % 4; slot 4: outside
+    sim = np.zeros((5, w + 2), dtype=np.float32)
+    hsum = np.zeros((5, w), dtype=np.float32)
+    anc = np.full((3, w + 2), np.nan, dtype=np.float32)
+    idx, g = scratch(w)
+    for r in range(max(v0 - 2, 0), min(v1 + 2, h + 2)):
+        if r < h:
+            zr = zb[r % 3]
+            sr = sel[r % 4]
+            for u in range(w):
+                zr[u + 1] = z[r, u]
+            for j in range(3):  # NaN at invalid depth, as the kernels expect
+                for u in range(w):
+                    zz = z[r, u]
+                    sr[j, u + 1] = cur[r, u, j] if zz == zz else np.nan
+        t = r - 1
+        if max(v0 - 1, 0) <= t < h:
+            similarity_row(zb[(t - 1) % 3] if t > 0 else zb[3], zb[t % 3],
+                           zb[r % 3] if r < h else zb[3], a, b, sim[t % 4], hsum[t % 4])
+        q = r - 2
+        if v0 <= q < v1:
+            if anchored:
+                anc[:] = sel[q % 4]
+            else:
+                for j in range(3):
+                    for u in range(w):
+                        anc[j, u + 1] = anchor[q, u, j]
+            sa, sm, sn = ring_slots(q, h)
+            crf_ring_row(q, sa, sm, sn, z[q], kq[q], sel, sim, hsum, anc, anchored, sigma, lam,
+                         fx, fy, cx, cy, idx, g, out)
+
+
 def crf_step(z, cur, anchor, kq, sim_mode, tau, sigma, lam, offs, fx, fy, cx, cy, out):
     """One synchronous pass of per-pixel minimisation of the 3F2N+ CRF energy.
 
@@ -524,7 +566,15 @@ def crf_step(z, cur, anchor, kq, sim_mode, tau, sigma, lam, offs, fx, fy, cx, cy
     the |Pearson| correlation of the depth patches of p_i and q (3). The least energy wins.
     Exact shortcut: when the current label is the anchor and ``sigma >= lam k_q sum_i w_i``,
     the triangle inequality proves no candidate beats it, so the pixel is skipped.
-    Writes every pixel of ``out``.
+    Writes every pixel of ``out``. Cross candidates with Kendall or no correlation run the
+    row kernels of :mod:`depthnormals.ddm.crf_ring` (``tau`` is then recomputed from ``z``,
+    row by row); the square neighbourhood and Pearson run the per-pixel kernel here.
     """
+    if int(sim_mode) != 3 and offs.shape == CROSS.shape and bool((offs == CROSS).all()):
+        a, b = sim_coefficients(int(sim_mode))  # Kendall's tau recomputed from z, row by row
+        run_rows(_crf_ring_rows, z.shape[0], z, cur, anchor, cur is anchor,
+                 np.ascontiguousarray(kq, dtype=np.float64), a, b, float(sigma), float(lam),
+                 float(fx), float(fy), float(cx), float(cy), out)
+        return
     run_rows(_crf_rows, z.shape[0], z, cur, anchor, cur is anchor, kq, int(sim_mode), tau,
              float(sigma), float(lam), offs, float(fx), float(fy), float(cx), float(cy), out)

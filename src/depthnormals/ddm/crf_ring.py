@@ -1,0 +1,256 @@
+"""The 3F2N+ CRF over the cross candidates, one row at a time from ring buffers.
+
+Used by the generic :func:`depthnormals.ddm.crf.crf_step` (cross candidates, Kendall or no
+correlation) and by the fused 3F2N+ pipeline (:mod:`depthnormals.ddm.fused`), which calls
+the same row functions on rows it has just selected, so both give identical results.
+
+Rings hold padded planar rows (column ``u`` at index ``u + 1``; the padding and the slot of
+rows outside the image are NaN for depth and normals, 0 for similarities):
+
+- ``sel`` (5, 3, W + 2) float32: the current normals, slot ``row % 4`` (slot 4: outside);
+- ``sim`` (5, W + 2) float32: the similarity ``s`` of every pixel (0 at invalid depth), slot
+  ``row % 4``; ``hsum`` (5, W) float32: its horizontal 3-sums.
+
+Per pixel ``q`` (``depthnormals.ddm.crf.crf_step`` gives the energy):
+
+1. **Exact shortcut, vectorised over the row**: where the current normal is the anchor and
+   ``sigma >= lam k_q sum_i s_i`` with the sum bounded above by the 3x3 sums of ``s`` (every
+   neighbour of valid depth counted, plus 1e-5 for float32 rounding: the sums are <= 8), no
+   candidate can beat the anchor (triangle inequality): the pixel keeps it.
+2. **The others** gather their 8 neighbours once and evaluate each distinct candidate
+   normal (an exact repeat cannot win: ties go to the first); the 8 distances of a
+   candidate are computed as one vector, then summed in order.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from ..estimators._common import store_normal
+
+__all__ = ["crf_ring_row", "ring_slots", "scratch", "sim_coefficients", "similarity_row"]
+
+_BIG = 1e6  # k_q clamp, as crf._BIG
+_CHUNK = 64  # hard pixels per batch; scratch rows of _CHUNK + 4 doubles (no 4K aliasing)
+_DCOL = (-1, 0, 1, -1, 1, -1, 0, 1)  # column offsets of the 8 neighbours, raster order
+_INL = {"cache": True, "error_model": "numpy", "inline": "always"}
+_JIT = {"cache": True, "error_model": "numpy"}
+
+
+def sim_coefficients(sim_mode: int) -> tuple[float, float]:
+    """(a, b) with similarity ``s = a + b tau``: 1 (mode 0), ``1 - tau`` (1), ``tau`` (2)."""
+    return {0: (1.0, 0.0), 1: (1.0, -1.0), 2: (0.0, 1.0)}[sim_mode]
+
+
+@nb.njit(**_JIT)
+def scratch(w):
+    """The scratch arrays of :func:`crf_ring_row` for rows of ``w`` pixels."""
+    return np.empty(w, dtype=np.int64), np.empty((54, _CHUNK + 4))
+
+
+@nb.njit(**_INL)
+def ring_slots(q, h):
+    """Slots of rows q - 1, q, q + 1 in a 4-row ring (slot 4: rows outside the image)."""
+    return ((q - 1) % 4 if q > 0 else 4), q % 4, ((q + 1) % 4 if q + 1 < h else 4)
+
+
+@nb.njit(**_JIT)
+def similarity_row(zp, zc, zn, a, b, srow, hrow):
+    """Similarity ``a + b tau`` of one row (0 at invalid depth) and its horizontal 3-sums.
+
+    ``zp, zc, zn``: padded depth rows above, at and below (NaN padding and outside rows);
+    ``tau`` is Kendall's of :mod:`depthnormals.ddm.correlation` (invalid neighbours compare
+    false, so they are ignored), in float32 (within 6e-8 of
+    :func:`depthnormals.ddm.correlation.kendall_map`). ``srow`` padded (W + 2) and ``hrow``
+    (W): float32.
+    """
+    w = hrow.size
+    one = np.float32(1.0)
+    zero = np.float32(0.0)
+    a = np.float32(a)
+    b = np.float32(b)
+    for u in range(w):  # branch-free; the counts are exact in float32
+        i = u + 1
+        z0 = zc[i]
+        mc = ((one if zp[i - 1] > z0 else zero) + (one if zp[i] > z0 else zero)
+              + (one if zp[i + 1] > z0 else zero) + (one if zc[i - 1] > z0 else zero)
+              + (one if zc[i + 1] > z0 else zero) + (one if zn[i - 1] > z0 else zero)
+              + (one if zn[i] > z0 else zero) + (one if zn[i + 1] > z0 else zero))
+        md = ((one if zp[i - 1] < z0 else zero) + (one if zp[i] < z0 else zero)
+              + (one if zp[i + 1] < z0 else zero) + (one if zc[i - 1] < z0 else zero)
+              + (one if zc[i + 1] < z0 else zero) + (one if zn[i - 1] < z0 else zero)
+              + (one if zn[i] < z0 else zero) + (one if zn[i + 1] < z0 else zero))
+        n = mc + md
+        t = a + b * (abs(mc - md) / (n if n > zero else one))
+        srow[i] = t if z0 == z0 else zero
+    srow[0] = zero
+    srow[w + 1] = zero
+    for u in range(w):
+        hrow[u] = srow[u] + srow[u + 1] + srow[u + 2]
+
+
+@nb.njit(**_INL)
+def _norm3(a, b, c):
+    return math.sqrt(a * a + b * b + c * c)
+
+
+@nb.njit(**_INL)
+def _dist(g, n, j, qx, qy, qz):
+    return g[24 + n, j] * _norm3(g[n, j] - qx, g[8 + n, j] - qy, g[16 + n, j] - qz)
+
+
+@nb.njit(**_INL)
+def _energies(g, c, nh, sigma, e_out):
+    """Energy of candidate ``c`` (a neighbour index; 8: the pixel itself) at every hard
+    pixel, vectorised over them; +inf where the candidate is invalid. The edge sum runs over
+    the neighbours in raster order, as the energy's definition."""
+    gx = g[c] if c < 8 else g[45]
+    gy = g[8 + c] if c < 8 else g[46]
+    gz = g[16 + c] if c < 8 else g[47]
+    gok = g[32 + c] if c < 8 else g[48]
+    inf = np.inf
+    for j in range(nh):
+        qx = gx[j]
+        qy = gy[j]
+        qz = gz[j]
+        ax = g[40, j]
+        e = sigma * _norm3(qx - ax, qy - g[41, j], qz - g[42, j])
+        e = e if ax == ax else 0.0
+        acc = _dist(g, 0, j, qx, qy, qz)
+        acc += _dist(g, 1, j, qx, qy, qz)
+        acc += _dist(g, 2, j, qx, qy, qz)
+        acc += _dist(g, 3, j, qx, qy, qz)
+        acc += _dist(g, 4, j, qx, qy, qz)
+        acc += _dist(g, 5, j, qx, qy, qz)
+        acc += _dist(g, 6, j, qx, qy, qz)
+        acc += _dist(g, 7, j, qx, qy, qz)
+        e += g[43, j] * acc
+        e_out[j] = e if gok[j] > 0.0 else inf
+
+
+@nb.njit(**_JIT)
+def crf_ring_row(q, a, m, s, zrow, kq, sel, sim, hsum, anc, anchored, sigma, lam, fx, fy, cx,
+                 cy, idx, g, out):
+    """One CRF row ``q`` into ``out[q]`` from the ring slots ``a, m, s`` of rows q - 1, q and
+    q + 1 (:func:`ring_slots`).
+
+    ``zrow`` (W): the depth of row q (NaN invalid; the normals in ``sel`` are NaN there too);
+    ``kq`` (W) float64: ``k_q`` as the energy uses it (NaN or inf: clamped to 1e6); ``anc``
+    (3, W + 2) float32: row q's anchors;
+    ``anchored``: the current normals are the anchors (skips the comparison). ``idx`` (W)
+    int64 and ``g`` (54, _CHUNK + 4) float64 (:func:`scratch`): scratch.
+
+    The pixels the shortcut cannot settle are compacted into a list; their neighbours are
+    gathered once into ``g`` and the five candidates' energies computed as vectors over the
+    list, so the per-pixel work has no data-dependent branches.
+    """
+    w = zrow.size
+    hp = hsum[a]
+    hc = hsum[m]
+    hn = hsum[s]
+    sc = sim[m]
+    x0 = sel[m, 0]
+    y0 = sel[m, 1]
+    t0 = sel[m, 2]
+    for u in range(w):  # the shortcut's test, vectorised
+        i = u + 1
+        k = kq[u]
+        k = k if k < _BIG else _BIG
+        bound = np.float64(hp[u] + hc[u] + hn[u] - sc[i]) + 1e-5  # >= float32 rounding
+        x = x0[i]
+        keep = (sigma >= lam * k * bound) & (x == x)
+        zq = zrow[u]
+        idx[u] = (zq == zq) & ~keep
+    if not anchored:
+        for u in range(w):
+            i = u + 1
+            x = x0[i]
+            zq = zrow[u]
+            idx[u] |= (zq == zq) & ~((x == anc[0, i]) & (y0[i] == anc[1, i])
+                                     & (t0[i] == anc[2, i]))
+    for u in range(w):  # the current normals (NaN at invalid depth) stand where kept
+        i = u + 1
+        out[q, u, 0] = x0[i]
+        out[q, u, 1] = y0[i]
+        out[q, u, 2] = t0[i]
+    nh = 0
+    for u in range(w):  # compaction (branch-free)
+        f = idx[u]
+        idx[nh] = u
+        nh += f
+    for c0 in range(0, nh, _CHUNK):
+        _hard_chunk(q, a, m, s, zrow, kq, sel, sim, anc, sigma, lam, fx, fy, cx, cy, idx, c0,
+                    min(nh, c0 + _CHUNK), g, out)
+
+
+@nb.njit(**_JIT)
+def _hard_chunk(q, a, m, s, zrow, kq, sel, sim, anc, sigma, lam, fx, fy, cx, cy, idx, c0, c1,
+                g, out):
+    """The per-pixel minimisation at columns ``idx[c0:c1]`` of row ``q`` (at most _CHUNK)."""
+    nh = c1 - c0
+    x0 = sel[m, 0]
+    y0 = sel[m, 1]
+    t0 = sel[m, 2]
+    nan = np.float32(np.nan)
+    for j in range(nh):
+        u = idx[c0 + j]
+        i = u + 1
+        for n in range(8):  # neighbours in raster order
+            sl = a if n < 3 else (m if n < 5 else s)
+            col = i + _DCOL[n]
+            x = np.float64(sel[sl, 0, col])
+            ok = x == x  # an invalid one: zero normal and weight, its term is +0 in every sum
+            g[n, j] = x if ok else 0.0
+            g[8 + n, j] = np.float64(sel[sl, 1, col]) if ok else 0.0
+            g[16 + n, j] = np.float64(sel[sl, 2, col]) if ok else 0.0
+            g[24 + n, j] = np.float64(sim[sl, col]) if ok else 0.0
+            g[32 + n, j] = 1.0 if ok else 0.0
+        g[40, j] = np.float64(anc[0, i])
+        g[41, j] = np.float64(anc[1, i])
+        g[42, j] = np.float64(anc[2, i])
+        k = kq[u]
+        g[43, j] = lam * (k if k < _BIG else _BIG)
+        x = np.float64(x0[i])
+        ok = x == x
+        g[45, j] = x if ok else 0.0
+        g[46, j] = np.float64(y0[i]) if ok else 0.0
+        g[47, j] = np.float64(t0[i]) if ok else 0.0
+        g[48, j] = 1.0 if ok else 0.0
+    # candidates in the public code's order: self, up, left, right, down
+    _energies(g, 8, nh, sigma, g[49])
+    _energies(g, 1, nh, sigma, g[50])
+    _energies(g, 3, nh, sigma, g[51])
+    _energies(g, 4, nh, sigma, g[52])
+    _energies(g, 6, nh, sigma, g[53])
+    for j in range(nh):
+        u = idx[c0 + j]
+        i = u + 1
+        wsum = 0.0
+        for n in range(8):
+            wsum += g[24 + n, j]
+        ax = anc[0, i]
+        if ((ax == ax) & (x0[i] == ax) & (y0[i] == anc[1, i]) & (t0[i] == anc[2, i])
+                & (sigma >= g[43, j] * wsum)):
+            continue  # the anchor, exactly (out[q, u] holds it)
+        best = np.inf
+        c = -1
+        for n in range(5):  # the first of equal energies wins
+            e = g[49 + n, j]
+            if e < best:
+                best = e
+                c = n
+        zq = zrow[u]
+        if c < 0:
+            out[q, u, 0] = nan
+            out[q, u, 1] = nan
+            out[q, u, 2] = nan
+            continue
+        nbr = (8, 1, 3, 4, 6)[c]
+        if nbr == 8:
+            bx, by, bz = g[45, j], g[46, j], g[47, j]
+        else:
+            bx, by, bz = g[nbr, j], g[8 + nbr, j], g[16 + nbr, j]
+        store_normal(out, q, u, bx, by, bz, (u - cx) * zq / fx, (q - cy) * zq / fy, zq)
