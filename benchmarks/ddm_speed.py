@@ -46,7 +46,12 @@ def main() -> None:
         "DDM mean + Kendall + CRF, module alone":
             lambda: ddm(base, d, fr.K, correlation="kendall", crf=True),
         "3f2n+ default (3F2N + DDM)": lambda: dn.estimate_normals(d, fr.K, method="3f2n+"),
-        "3f2n+ full (3F2N + mean + Kendall + CRF)":
+        "3f2n+ curvature-only, paper's selection (consistency=None)":
+            lambda: dn.estimate_normals(d, fr.K, method="3f2n+", consistency=None),
+        "3f2n+ full, paper's (Kendall + CRF, consistency=None)":
+            lambda: dn.estimate_normals(d, fr.K, method="3f2n+", correlation="kendall",
+                                        crf=True, consistency=None),
+        "3f2n+ full with consistency (Kendall + CRF)":
             lambda: dn.estimate_normals(d, fr.K, method="3f2n+", correlation="kendall",
                                         crf=True),
     }

@@ -16,7 +16,7 @@ import numpy as np
 from .._parallel import run_rows
 from ..estimators._common import row_arrays, store_normal
 from .correlation import pearson_pair
-from .crf_ring import crf_ring_row, ring_slots, scratch, sim_coefficients, similarity_row
+from .crf_ring import crf_flush, crf_ring_row, ring_slots, scratch, sim_coefficients, similarity_row
 
 __all__ = ["CROSS", "SQUARE", "clamp_key", "crf_step", "cross_select_row", "inconsistency",
            "inconsistency_pq", "select_min", "select_ring_row"]
@@ -527,7 +527,8 @@ def _crf_ring_rows(v0, v1, z, cur, anchor, anchored, kq, a, b, sigma, lam, fx, f
     sim = np.zeros((5, w + 2), dtype=np.float32)
     hsum = np.zeros((5, w), dtype=np.float32)
     anc = np.full((3, w + 2), np.nan, dtype=np.float32)
-    idx, g = scratch(w)
+    idx, g, pos = scratch(w)
+    pend = 0
     for r in range(max(v0 - 2, 0), min(v1 + 2, h + 2)):
         if r < h:
             zr = zb[r % 3]
@@ -551,8 +552,9 @@ def _crf_ring_rows(v0, v1, z, cur, anchor, anchored, kq, a, b, sigma, lam, fx, f
                     for u in range(w):
                         anc[j, u + 1] = anchor[q, u, j]
             sa, sm, sn = ring_slots(q, h)
-            crf_ring_row(q, sa, sm, sn, z[q], kq[q], sel, sim, hsum, anc, anchored, sigma, lam,
-                         fx, fy, cx, cy, idx, g, out)
+            pend = crf_ring_row(q, sa, sm, sn, z, kq[q], sel, sim, hsum, anc, anchored, sigma,
+                                lam, idx, g, pos, pend, fx, fy, cx, cy, out)
+    crf_flush(z, g, pos, pend, sigma, fx, fy, cx, cy, out)
 
 
 def crf_step(z, cur, anchor, kq, sim_mode, tau, sigma, lam, offs, fx, fy, cx, cy, out):

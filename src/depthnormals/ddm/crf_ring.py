@@ -31,10 +31,11 @@ import numpy as np
 
 from ..estimators._common import store_normal
 
-__all__ = ["crf_ring_row", "ring_slots", "scratch", "sim_coefficients", "similarity_row"]
+__all__ = ["crf_flush", "crf_ring_row", "ring_slots", "scratch", "sim_coefficients",
+           "similarity_row"]
 
 _BIG = 1e6  # k_q clamp, as crf._BIG
-_CHUNK = 64  # hard pixels per batch; scratch rows of _CHUNK + 4 doubles (no 4K aliasing)
+_CHUNK = 64  # hard pixels per batch; scratch rows of _CHUNK + 4 floats (no 4K aliasing)
 _DCOL = (-1, 0, 1, -1, 1, -1, 0, 1)  # column offsets of the 8 neighbours, raster order
 _INL = {"cache": True, "error_model": "numpy", "inline": "always"}
 _JIT = {"cache": True, "error_model": "numpy"}
@@ -47,8 +48,9 @@ def sim_coefficients(sim_mode: int) -> tuple[float, float]:
 
 @nb.njit(**_JIT)
 def scratch(w):
-    """The scratch arrays of :func:`crf_ring_row` for rows of ``w`` pixels."""
-    return np.empty(w, dtype=np.int64), np.empty((54, _CHUNK + 4))
+    """The scratch arrays ``idx, g, pos`` of :func:`crf_ring_row` for rows of ``w`` pixels."""
+    return (np.empty(w, dtype=np.int64), np.empty((54, _CHUNK + 4), dtype=np.float32),
+            np.empty((2, _CHUNK), dtype=np.int64))
 
 
 @nb.njit(**_INL)
@@ -111,14 +113,16 @@ def _energies(g, c, nh, sigma, e_out):
     gy = g[8 + c] if c < 8 else g[46]
     gz = g[16 + c] if c < 8 else g[47]
     gok = g[32 + c] if c < 8 else g[48]
-    inf = np.inf
+    inf = np.float32(np.inf)
+    zero = np.float32(0.0)
+    sigma = np.float32(sigma)
     for j in range(nh):
         qx = gx[j]
         qy = gy[j]
         qz = gz[j]
         ax = g[40, j]
         e = sigma * _norm3(qx - ax, qy - g[41, j], qz - g[42, j])
-        e = e if ax == ax else 0.0
+        e = e if ax == ax else zero
         acc = _dist(g, 0, j, qx, qy, qz)
         acc += _dist(g, 1, j, qx, qy, qz)
         acc += _dist(g, 2, j, qx, qy, qz)
@@ -128,26 +132,28 @@ def _energies(g, c, nh, sigma, e_out):
         acc += _dist(g, 6, j, qx, qy, qz)
         acc += _dist(g, 7, j, qx, qy, qz)
         e += g[43, j] * acc
-        e_out[j] = e if gok[j] > 0.0 else inf
+        e_out[j] = e if gok[j] > zero else inf
 
 
 @nb.njit(**_JIT)
-def crf_ring_row(q, a, m, s, zrow, kq, sel, sim, hsum, anc, anchored, sigma, lam, fx, fy, cx,
-                 cy, idx, g, out):
+def crf_ring_row(q, a, m, s, z, kq, sel, sim, hsum, anc, anchored, sigma, lam, idx, g, pos,
+                 pend, fx, fy, cx, cy, out):
     """One CRF row ``q`` into ``out[q]`` from the ring slots ``a, m, s`` of rows q - 1, q and
-    q + 1 (:func:`ring_slots`).
+    q + 1 (:func:`ring_slots`); returns the number of pixels pending in ``g``.
 
-    ``zrow`` (W): the depth of row q (NaN invalid; the normals in ``sel`` are NaN there too);
-    ``kq`` (W) float64: ``k_q`` as the energy uses it (NaN or inf: clamped to 1e6); ``anc``
-    (3, W + 2) float32: row q's anchors;
-    ``anchored``: the current normals are the anchors (skips the comparison). ``idx`` (W)
-    int64 and ``g`` (54, _CHUNK + 4) float64 (:func:`scratch`): scratch.
+    ``z`` (H, W): the depth (NaN invalid; the normals in ``sel`` are NaN there too); ``kq``
+    (W) float64: row q's ``k_q`` as the energy uses it (NaN or inf: clamped to 1e6); ``anc``
+    (3, W + 2) float32: row q's anchors; ``anchored``: the current normals are the anchors
+    (skips the comparison). ``idx, g, pos``: :func:`scratch`; ``pend``: the pixels pending
+    in it (0 at the start of a band; :func:`crf_flush` after its last row).
 
-    The pixels the shortcut cannot settle are compacted into a list; their neighbours are
-    gathered once into ``g`` and the five candidates' energies computed as vectors over the
-    list, so the per-pixel work has no data-dependent branches.
+    The pixels the shortcut cannot settle are compacted into a list and their neighbours
+    gathered into ``g``; every ``_CHUNK`` of them (across rows) the five candidates' energies
+    are computed as vectors over the batch, so the per-pixel work has no data-dependent
+    branches and the vector loops run full.
     """
-    w = zrow.size
+    w = kq.size
+    zrow = z[q]
     hp = hsum[a]
     hc = hsum[m]
     hn = hsum[s]
@@ -181,58 +187,64 @@ def crf_ring_row(q, a, m, s, zrow, kq, sel, sim, hsum, anc, anchored, sigma, lam
         f = idx[u]
         idx[nh] = u
         nh += f
-    for c0 in range(0, nh, _CHUNK):
-        _hard_chunk(q, a, m, s, zrow, kq, sel, sim, anc, sigma, lam, fx, fy, cx, cy, idx, c0,
-                    min(nh, c0 + _CHUNK), g, out)
-
-
-@nb.njit(**_JIT)
-def _hard_chunk(q, a, m, s, zrow, kq, sel, sim, anc, sigma, lam, fx, fy, cx, cy, idx, c0, c1,
-                g, out):
-    """The per-pixel minimisation at columns ``idx[c0:c1]`` of row ``q`` (at most _CHUNK)."""
-    nh = c1 - c0
-    x0 = sel[m, 0]
-    y0 = sel[m, 1]
-    t0 = sel[m, 2]
-    nan = np.float32(np.nan)
-    for j in range(nh):
-        u = idx[c0 + j]
+    zero = np.float32(0.0)
+    one = np.float32(1.0)
+    for jj in range(nh):
+        u = idx[jj]
         i = u + 1
+        j = pend
         for n in range(8):  # neighbours in raster order
             sl = a if n < 3 else (m if n < 5 else s)
             col = i + _DCOL[n]
-            x = np.float64(sel[sl, 0, col])
+            x = sel[sl, 0, col]
             ok = x == x  # an invalid one: zero normal and weight, its term is +0 in every sum
-            g[n, j] = x if ok else 0.0
-            g[8 + n, j] = np.float64(sel[sl, 1, col]) if ok else 0.0
-            g[16 + n, j] = np.float64(sel[sl, 2, col]) if ok else 0.0
-            g[24 + n, j] = np.float64(sim[sl, col]) if ok else 0.0
-            g[32 + n, j] = 1.0 if ok else 0.0
-        g[40, j] = np.float64(anc[0, i])
-        g[41, j] = np.float64(anc[1, i])
-        g[42, j] = np.float64(anc[2, i])
+            g[n, j] = x if ok else zero
+            g[8 + n, j] = sel[sl, 1, col] if ok else zero
+            g[16 + n, j] = sel[sl, 2, col] if ok else zero
+            g[24 + n, j] = sim[sl, col] if ok else zero
+            g[32 + n, j] = one if ok else zero
+        g[40, j] = anc[0, i]
+        g[41, j] = anc[1, i]
+        g[42, j] = anc[2, i]
         k = kq[u]
         g[43, j] = lam * (k if k < _BIG else _BIG)
-        x = np.float64(x0[i])
+        x = x0[i]
         ok = x == x
-        g[45, j] = x if ok else 0.0
-        g[46, j] = np.float64(y0[i]) if ok else 0.0
-        g[47, j] = np.float64(t0[i]) if ok else 0.0
-        g[48, j] = 1.0 if ok else 0.0
+        g[45, j] = x if ok else zero
+        g[46, j] = y0[i] if ok else zero
+        g[47, j] = t0[i] if ok else zero
+        g[48, j] = one if ok else zero
+        pos[0, j] = q
+        pos[1, j] = u
+        pend += 1
+        if pend == _CHUNK:
+            crf_flush(z, g, pos, pend, sigma, fx, fy, cx, cy, out)
+            pend = 0
+    return pend
+
+
+@nb.njit(**_JIT)
+def crf_flush(z, g, pos, nh, sigma, fx, fy, cx, cy, out):
+    """Minimise the energy at the ``nh`` pixels pending in ``g`` (at ``pos``) and store the
+    winners that are not the pixel's own normal (which ``out`` holds already)."""
+    if nh == 0:
+        return
     # candidates in the public code's order: self, up, left, right, down
     _energies(g, 8, nh, sigma, g[49])
     _energies(g, 1, nh, sigma, g[50])
     _energies(g, 3, nh, sigma, g[51])
     _energies(g, 4, nh, sigma, g[52])
     _energies(g, 6, nh, sigma, g[53])
+    nan = np.float32(np.nan)
+    zero = np.float32(0.0)
     for j in range(nh):
-        u = idx[c0 + j]
-        i = u + 1
-        wsum = 0.0
+        q = pos[0, j]
+        u = pos[1, j]
+        wsum = zero
         for n in range(8):
             wsum += g[24 + n, j]
-        ax = anc[0, i]
-        if ((ax == ax) & (x0[i] == ax) & (y0[i] == anc[1, i]) & (t0[i] == anc[2, i])
+        ax = g[40, j]
+        if ((ax == ax) & (g[45, j] == ax) & (g[46, j] == g[41, j]) & (g[47, j] == g[42, j])
                 & (sigma >= g[43, j] * wsum)):
             continue  # the anchor, exactly (out[q, u] holds it)
         best = np.inf
@@ -242,15 +254,14 @@ def _hard_chunk(q, a, m, s, zrow, kq, sel, sim, anc, sigma, lam, fx, fy, cx, cy,
             if e < best:
                 best = e
                 c = n
-        zq = zrow[u]
+        if c == 0:
+            continue  # the pixel's own normal (out[q, u] holds it)
         if c < 0:
             out[q, u, 0] = nan
             out[q, u, 1] = nan
             out[q, u, 2] = nan
             continue
         nbr = (8, 1, 3, 4, 6)[c]
-        if nbr == 8:
-            bx, by, bz = g[45, j], g[46, j], g[47, j]
-        else:
-            bx, by, bz = g[nbr, j], g[8 + nbr, j], g[16 + nbr, j]
-        store_normal(out, q, u, bx, by, bz, (u - cx) * zq / fx, (q - cy) * zq / fy, zq)
+        zq = z[q, u]
+        store_normal(out, q, u, np.float64(g[nbr, j]), np.float64(g[8 + nbr, j]),
+                     np.float64(g[16 + nbr, j]), (u - cx) * zq / fx, (q - cy) * zq / fy, zq)

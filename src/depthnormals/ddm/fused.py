@@ -1,12 +1,14 @@
-"""3F2N+ in one pass: 3F2N, depth curvature and the cross selection fused row by row.
+"""3F2N+ in one pass: 3F2N, depth curvature, the cross selection and the CRF fused row by row.
 
 The separate stages of :func:`depthnormals.ddm.discontinuity_discrimination` write and re-read
-two full-size maps (the 3F2N normals, interleaved, and the curvature) and select with strided
-loads. Here every row of 3F2N normals and of curvature goes into small planar ring buffers
-(three rows, padded by one NaN/inf column each side) and row ``v - 1`` is selected as soon as
-row ``v`` exists, so all of it stays in L1 and every inner loop vectorises (8 lanes for
-float32 depth). Same kernels, same arithmetic as the separate stages: the results are equal
-(``tests/test_ddm_fused.py``).
+full-size maps (the 3F2N normals, interleaved, the curvature, Kendall's tau, the selected
+normals) and select with strided loads. Here every row of 3F2N normals and of curvature goes
+into small planar ring buffers (three rows, padded by one NaN/inf column each side) and row
+``v - 1`` is selected as soon as row ``v`` exists; with the CRF, the selected rows go into a
+second ring with their Kendall similarities, and row ``v - 2`` is refined by the row kernels
+of :mod:`depthnormals.ddm.crf_ring` as soon as row ``v - 1`` is selected. All of it stays in
+L1 and the inner loops vectorise (8 lanes for float32 depth). Same kernels, same arithmetic
+as the separate stages: the results are equal (``tests/test_ddm_fused.py``).
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from .._parallel import run_rows
 from ..estimators._common import NEIGHBOURS8
 from ..estimators.threefn import row_normals, row_setup
 from .crf import select_ring_row
-from .crf_ring import crf_ring_row, ring_slots, scratch, sim_coefficients, similarity_row
+from .crf_ring import crf_flush, crf_ring_row, ring_slots, scratch, sim_coefficients, similarity_row
 from .curvature import mean_max_row, row_constants
 
 __all__ = ["fused_3f2n_plus"]
@@ -42,7 +44,8 @@ def _plus_rows(v0, v1, z, R, c, acol, bcol, fx, fy, cx, cy, mode, kc, use_max, s
     sim = np.zeros((5, w + 2), dtype=np.float32)
     hsum = np.zeros((5, w), dtype=np.float32)
     kq = np.empty(w)
-    idx, g = scratch(w)
+    idx, g, pos = scratch(w)
+    pend = 0
     lag = 2 if crf else 1  # rows between computing a row and finishing one
     prev = -1
     for r in range(max(v0 - lag, 0), min(v1 + lag, h + lag)):
@@ -82,8 +85,10 @@ def _plus_rows(v0, v1, z, R, c, acol, bcol, fx, fy, cx, cy, mode, kc, use_max, s
             for u in range(w):
                 kq[u] = np.float64(kr[u + 1]) * np.float64(z[q, u])
             ra, rm, rn = ring_slots(q, h)
-            crf_ring_row(q, ra, rm, rn, z[q], kq, sel, sim, hsum, sel[rm], True, sigma, lam, fx,
-                         fy, cx, cy, idx, g, out)
+            pend = crf_ring_row(q, ra, rm, rn, z, kq, sel, sim, hsum, sel[rm], True, sigma, lam,
+                                idx, g, pos, pend, fx, fy, cx, cy, out)
+    if crf:
+        crf_flush(z, g, pos, pend, sigma, fx, fy, cx, cy, out)
 
 
 def fused_3f2n_plus(z: np.ndarray, fx: float, fy: float, cx: float, cy: float, *, mode: int,

@@ -36,16 +36,9 @@ def prepare(depth: Any, K: Any, depth_scale: float | None) -> tuple[np.ndarray, 
     return z, cam
 
 
-@nb.njit(cache=True, error_model="numpy", nogil=True)
-def _depth_range(z):
-    lo = np.inf
-    hi = -np.inf
-    for v in range(z.shape[0]):
-        for u in range(z.shape[1]):
-            x = np.float64(z[v, u])
-            lo = x if x < lo else lo  # NaN (invalid) compares false: ignored
-            hi = x if x > hi else hi
-    return lo, hi
+def _depth_range(z: np.ndarray) -> tuple[float, float]:
+    """(min, max) of the valid depths (NaN skipped by fmin/fmax; NaN, NaN when none)."""
+    return float(np.fmin.reduce(z, axis=None)), float(np.fmax.reduce(z, axis=None))
 
 
 #: Depth range (any unit) and intrinsics magnitude in which the float32 row passes keep full
@@ -65,7 +58,7 @@ def row_dtype(z: np.ndarray, fx: float = 1.0, fy: float = 1.0, cx: float = 0.0,
     big = FLOAT32_RANGE[1]
     fits = (FLOAT32_RANGE[0] <= lo and hi <= big and FLOAT32_RANGE[0] <= min(abs(fx), abs(fy))
             and max(abs(fx), abs(fy), abs(cx) + z.shape[1], abs(cy) + z.shape[0]) <= big)
-    if not (lo <= hi):  # no valid pixel at all
+    if not (lo <= hi):  # no valid pixel at all (NaN)
         fits = True
     return z if fits else z.astype(np.float64)
 
