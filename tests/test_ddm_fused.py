@@ -151,3 +151,20 @@ def test_fused_crf_equals_selection_then_crf_step(rough, dtype, sim_mode, lam):
             assert np.array_equal(out, ref, equal_nan=True)
     finally:
         dn.set_num_threads(threads)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 5), (5, 1), (2, 7), (70, 3)])
+def test_fused_crf_on_degenerate_shapes(shape):
+    """Rows and columns too few for a 3x3 neighbourhood: no crash, invalid depth gives NaN,
+    and the fused CRF agrees with 3F2N followed by the separate module."""
+    rng = np.random.default_rng(4)
+    z = (1.0 + 0.1 * rng.random(shape)).astype(np.float32)
+    z[rng.random(shape) < 0.2] = 0.0
+    Ks = (100.0, 100.0, 3.0, 2.0)
+    opts = {"correlation": "kendall", "crf": True, "consistency": None, "lambda_": 1.0}
+    fused = dn.estimate_normals(z, Ks, method="3f2n+", **opts)
+    separate = dn.discontinuity_discrimination(dn.three_filters_to_normal(z, Ks), z, Ks, **opts)
+    assert np.isnan(fused[z == 0]).all()
+    assert (np.isnan(fused[..., 0]) == np.isnan(separate[..., 0])).all()
+    ok = ~np.isnan(fused[..., 0])
+    assert np.allclose(fused[ok], separate[ok], atol=1e-5)

@@ -570,7 +570,9 @@ def crf_step(z, cur, anchor, kq, sim_mode, tau, sigma, lam, offs, fx, fy, cx, cy
     the triangle inequality proves no candidate beats it, so the pixel is skipped.
     Writes every pixel of ``out``. Cross candidates with Kendall or no correlation run the
     row kernels of :mod:`depthnormals.ddm.crf_ring` (``tau`` is then recomputed from ``z``,
-    row by row); the square neighbourhood and Pearson run the per-pixel kernel here.
+    row by row, and the energies are evaluated in float32: docs/3f2n-plus.md, "How the CRF
+    is computed"); the square neighbourhood and Pearson run the per-pixel float64 kernel
+    here.
     """
     if int(sim_mode) != 3 and offs.shape == CROSS.shape and bool((offs == CROSS).all()):
         a, b = sim_coefficients(int(sim_mode))  # Kendall's tau recomputed from z, row by row
