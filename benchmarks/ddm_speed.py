@@ -21,6 +21,7 @@ import numpy as np
 
 import depthnormals as dn
 from depthnormals.ddm import discontinuity_discrimination as ddm
+from depthnormals.evaluate import machine_description
 
 
 def main() -> None:
@@ -69,7 +70,7 @@ def main() -> None:
             cpu[name].append(time.process_time() - c0)
     ref = "FALS (OpenCV, window 5), apply only"
     rmed, rmin, rcpu = (np.median(wall[ref]), np.min(wall[ref]), np.median(cpu[ref]))
-    print(f"machine: {platform.machine()} {_cpu_name()}, {os.cpu_count()} CPUs; numba "
+    print(f"machine: {platform.machine()} {machine_description()['cpu']}, {os.cpu_count()} CPUs; numba "
           f"{numba.__version__}, OpenCV {cv2.__version__}, numpy {np.__version__}; {w}x{h}, "
           f"1 thread, {args.repeats} repeats")
     print("| case | median ms | min ms | CPU ms (median) | median / FALS | min / FALS "
@@ -79,17 +80,6 @@ def main() -> None:
         md, mn, cp = np.median(wall[name]), np.min(wall[name]), np.median(cpu[name])
         print(f"| {name} | {md * 1e3:.2f} | {mn * 1e3:.2f} | {cp * 1e3:.2f} | {md / rmed:.2f}x "
               f"| {mn / rmin:.2f}x | {cp / rcpu:.2f}x |")
-
-
-def _cpu_name() -> str:
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor()
 
 
 if __name__ == "__main__":

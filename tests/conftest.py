@@ -1,4 +1,5 @@
-"""Small shared fixtures: the shared data folder and the 3F2N torus-knot frame."""
+"""Small shared fixtures: the shared data folder, the 3F2N torus-knot frame and a rough
+analytic scene for the fast-path equivalence tests."""
 
 from __future__ import annotations
 
@@ -28,3 +29,28 @@ def torusknot(shared_data):
     frames = list(read_3f2n(folder))
     assert len(frames) == 1
     return frames[0]
+
+
+ROUGH_K = (131.25, 131.25, 79.5, 59.5)  # the intrinsics rough_sphere renders with
+
+
+@pytest.fixture(scope="session")
+def rough_sphere():
+    """``make(seed, sigma)``: a rough analytic depth map (see :func:`_rough_sphere`)."""
+    return _rough_sphere
+
+
+def _rough_sphere(seed: int, sigma: float):
+    """Depth (120, 160) of the sphere before a wall at ``ROUGH_K``: Gaussian noise ``sigma``
+    (m), 3 % random holes and a 7x10 hole (0 = invalid), so every branch of the row passes
+    (borders, invalid neighbours, occlusions, curvature) is exercised."""
+    import numpy as np
+
+    from depthnormals.analytic import make_scene
+
+    rng = np.random.default_rng(seed)
+    z = make_scene("sphere-before-wall").render(K=ROUGH_K, shape=(120, 160)).depth.copy()
+    z += rng.normal(0.0, sigma, z.shape) * (z > 0)
+    z[rng.random(z.shape) < 0.03] = 0.0
+    z[40:47, 60:70] = 0.0
+    return z

@@ -7,26 +7,19 @@ import numpy as np
 import pytest
 
 import depthnormals as dn
-from depthnormals.analytic import make_scene
 from depthnormals.ddm import fused_plus
 from depthnormals.ddm.correlation import kendall_map
 from depthnormals.ddm.crf import CROSS, crf_step
 from depthnormals.ddm.fused import fused_3f2n_plus
 from depthnormals.estimators._common import prepare, row_dtype
 
-K = (131.25, 131.25, 79.5, 59.5)
+K = (131.25, 131.25, 79.5, 59.5)  # conftest.ROUGH_K: the rough scene's intrinsics
 
 
 @pytest.fixture(scope="module")
-def rough():
+def rough(rough_sphere):
     """Curved surfaces, occlusions, noise and holes (every branch of the row passes)."""
-    rng = np.random.default_rng(3)
-    r = make_scene("sphere-before-wall").render(K=K, shape=(120, 160))
-    z = r.depth.copy()
-    z += rng.normal(0.0, 0.001, z.shape) * (z > 0)
-    z[rng.random(z.shape) < 0.03] = 0.0
-    z[40:47, 60:70] = 0.0
-    return z
+    return rough_sphere(3, 0.001)
 
 
 def _agree(a, b, *, max_deg=1e-3):

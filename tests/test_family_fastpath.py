@@ -9,24 +9,18 @@ import numpy as np
 import pytest
 
 import depthnormals as dn
-from depthnormals.analytic import make_scene
 from depthnormals.estimators import pointcloud, range_image
 from depthnormals.estimators._eig3 import smallest_eigenvector, smallest_eigenvector_newton
 
 FAMILY = ("sda-sne", "sne-roadseg", "fals", "sri", "line-mod", "plane-svd", "plane-pca",
           "vector-svd", "area-weighted", "angle-weighted")
-K = (131.25, 131.25, 79.5, 59.5)
+K = (131.25, 131.25, 79.5, 59.5)  # conftest.ROUGH_K: the rough scene's intrinsics
 
 
 @pytest.fixture(scope="module")
-def rough():
+def rough(rough_sphere):
     """A curved scene with noise and holes: every branch of the fast paths is exercised."""
-    rng = np.random.default_rng(7)
-    r = make_scene("sphere-before-wall").render(K=K, shape=(120, 160))
-    z = r.depth.copy()
-    z += rng.normal(0.0, 0.002, z.shape) * (z > 0)
-    z[rng.random(z.shape) < 0.03] = 0.0
-    z[40:47, 60:70] = 0.0
+    z = rough_sphere(7, 0.002)
     return np.where(z > 0, z, np.nan)
 
 

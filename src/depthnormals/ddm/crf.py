@@ -16,7 +16,15 @@ import numpy as np
 from .._parallel import run_rows
 from ..estimators._common import row_arrays, store_normal
 from .correlation import pearson_pair
-from .crf_ring import crf_flush, crf_ring_row, ring_slots, scratch, sim_coefficients, similarity_row
+from .crf_ring import (
+    _BIG,
+    crf_flush,
+    crf_ring_row,
+    ring_slots,
+    scratch,
+    sim_coefficients,
+    similarity_ring_row,
+)
 
 __all__ = ["CROSS", "SQUARE", "clamp_key", "crf_step", "cross_select_row", "inconsistency",
            "inconsistency_pq", "select_min", "select_ring_row"]
@@ -26,7 +34,6 @@ __all__ = ["CROSS", "SQUARE", "clamp_key", "crf_step", "cross_select_row", "inco
 CROSS = np.array([[0, 0], [-1, 0], [0, -1], [0, 1], [1, 0]], dtype=np.int64)
 SQUARE = np.array([[0, 0], [-1, -1], [-1, 0], [-1, 1], [0, -1], [0, 1], [1, -1], [1, 0],
                    [1, 1]], dtype=np.int64)
-_BIG = 1e6
 _KEY_MAX = np.finfo(np.float64).max  # keys at or above it tie (first wins)
 
 
@@ -541,19 +548,17 @@ def _crf_ring_rows(v0, v1, z, cur, anchor, anchored, kq, a, b, sigma, lam, fx, f
                     sr[j, u + 1] = cur[r, u, j] if zz == zz else np.nan
         t = r - 1
         if max(v0 - 1, 0) <= t < h:
-            similarity_row(zb[(t - 1) % 3] if t > 0 else zb[3], zb[t % 3],
-                           zb[r % 3] if r < h else zb[3], a, b, sim[t % 4], hsum[t % 4])
+            similarity_ring_row(t, h, zb, a, b, sim, hsum)
         q = r - 2
         if v0 <= q < v1:
-            if anchored:
-                anc[:] = sel[q % 4]
-            else:
+            sa, sm, sn = ring_slots(q, h)
+            if not anchored:
                 for j in range(3):
                     for u in range(w):
                         anc[j, u + 1] = anchor[q, u, j]
-            sa, sm, sn = ring_slots(q, h)
-            pend = crf_ring_row(q, sa, sm, sn, z, kq[q], sel, sim, hsum, anc, anchored, sigma,
-                                lam, idx, g, pos, pend, fx, fy, cx, cy, out)
+            pend = crf_ring_row(q, sa, sm, sn, z, kq[q], sel, sim, hsum,
+                                sel[sm] if anchored else anc, anchored, sigma, lam, idx, g, pos,
+                                pend, fx, fy, cx, cy, out)
     crf_flush(z, g, pos, pend, sigma, fx, fy, cx, cy, out)
 
 

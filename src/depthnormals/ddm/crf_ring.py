@@ -17,9 +17,10 @@ Per pixel ``q`` (``depthnormals.ddm.crf.crf_step`` gives the energy):
    ``sigma >= lam k_q sum_i s_i`` with the sum bounded above by the 3x3 sums of ``s`` (every
    neighbour of valid depth counted, plus 1e-5 for float32 rounding: the sums are <= 8), no
    candidate can beat the anchor (triangle inequality): the pixel keeps it.
-2. **The others** gather their 8 neighbours once and evaluate each distinct candidate
-   normal (an exact repeat cannot win: ties go to the first); the 8 distances of a
-   candidate are computed as one vector, then summed in order.
+2. **The others** are compacted; their 8 neighbours are gathered once into a batch of
+   ``_CHUNK`` pixels that fills across rows, and the five candidates' energies are computed
+   in float32 as vectors over the batch (the sum over the neighbours in raster order; ties
+   go to the first candidate, so a repeated normal never wins twice).
 """
 
 from __future__ import annotations
@@ -32,11 +33,12 @@ import numpy as np
 from ..estimators._common import store_normal
 
 __all__ = ["crf_flush", "crf_ring_row", "ring_slots", "scratch", "sim_coefficients",
-           "similarity_row"]
+           "similarity_ring_row", "similarity_row"]
 
-_BIG = 1e6  # k_q clamp, as crf._BIG
+_BIG = 1e6  # k_q is clamped to it (inf and NaN too): a valid pixel always has a finite energy
 _CHUNK = 64  # hard pixels per batch; scratch rows of _CHUNK + 4 floats (no 4K aliasing)
 _DCOL = (-1, 0, 1, -1, 1, -1, 0, 1)  # column offsets of the 8 neighbours, raster order
+_CANDS = (8, 1, 3, 4, 6)  # candidates in the public code's order: self (8), up, left, right, down
 _INL = {"cache": True, "error_model": "numpy", "inline": "always"}
 _JIT = {"cache": True, "error_model": "numpy"}
 
@@ -48,7 +50,13 @@ def sim_coefficients(sim_mode: int) -> tuple[float, float]:
 
 @nb.njit(**_JIT)
 def scratch(w):
-    """The scratch arrays ``idx, g, pos`` of :func:`crf_ring_row` for rows of ``w`` pixels."""
+    """The scratch arrays ``idx, g, pos`` of :func:`crf_ring_row` for rows of ``w`` pixels.
+
+    ``g`` rows, one column per pending pixel: 0-23 the 8 neighbours' normals (x, y, z blocks;
+    zeros where invalid), 24-31 their weights (0 where invalid), 32-39 their validity, 40-42
+    the anchor, 43 ``lam k_q``, 45-47 the pixel's own normal, 48 its validity, 49-53 the five
+    candidates' energies. ``pos``: (row, column) of each pending pixel.
+    """
     return (np.empty(w, dtype=np.int64), np.empty((54, _CHUNK + 4), dtype=np.float32),
             np.empty((2, _CHUNK), dtype=np.int64))
 
@@ -92,6 +100,14 @@ def similarity_row(zp, zc, zn, a, b, srow, hrow):
     srow[w + 1] = zero
     for u in range(w):
         hrow[u] = srow[u] + srow[u + 1] + srow[u + 2]
+
+
+@nb.njit(**_JIT)
+def similarity_ring_row(t, h, zb, a, b, sim, hsum):
+    """:func:`similarity_row` of row ``t`` from a ring of padded depth rows (slot
+    ``row % 3``, slot 3: outside the image) into slot ``t % 4`` of ``sim`` and ``hsum``."""
+    similarity_row(zb[(t - 1) % 3] if t > 0 else zb[3], zb[t % 3],
+                   zb[(t + 1) % 3] if t + 1 < h else zb[3], a, b, sim[t % 4], hsum[t % 4])
 
 
 @nb.njit(**_INL)
@@ -229,12 +245,12 @@ def crf_flush(z, g, pos, nh, sigma, fx, fy, cx, cy, out):
     winners that are not the pixel's own normal (which ``out`` holds already)."""
     if nh == 0:
         return
-    # candidates in the public code's order: self, up, left, right, down
-    _energies(g, 8, nh, sigma, g[49])
-    _energies(g, 1, nh, sigma, g[50])
-    _energies(g, 3, nh, sigma, g[51])
-    _energies(g, 4, nh, sigma, g[52])
-    _energies(g, 6, nh, sigma, g[53])
+    # one call per candidate, each with a constant index (its rows fold at compile time)
+    _energies(g, _CANDS[0], nh, sigma, g[49])
+    _energies(g, _CANDS[1], nh, sigma, g[50])
+    _energies(g, _CANDS[2], nh, sigma, g[51])
+    _energies(g, _CANDS[3], nh, sigma, g[52])
+    _energies(g, _CANDS[4], nh, sigma, g[53])
     nan = np.float32(np.nan)
     zero = np.float32(0.0)
     for j in range(nh):
@@ -261,7 +277,7 @@ def crf_flush(z, g, pos, nh, sigma, fx, fy, cx, cy, out):
             out[q, u, 1] = nan
             out[q, u, 2] = nan
             continue
-        nbr = (8, 1, 3, 4, 6)[c]
+        nbr = _CANDS[c]
         zq = z[q, u]
         store_normal(out, q, u, np.float64(g[nbr, j]), np.float64(g[8 + nbr, j]),
                      np.float64(g[16 + nbr, j]), (u - cx) * zq / fx, (q - cy) * zq / fy, zq)

@@ -20,7 +20,7 @@ from .._parallel import run_rows
 from ..estimators._common import NEIGHBOURS8
 from ..estimators.threefn import row_normals, row_setup
 from .crf import select_ring_row
-from .crf_ring import crf_flush, crf_ring_row, ring_slots, scratch, sim_coefficients, similarity_row
+from .crf_ring import crf_flush, crf_ring_row, ring_slots, scratch, sim_coefficients, similarity_ring_row
 from .curvature import mean_max_row, row_constants
 
 __all__ = ["fused_3f2n_plus"]
@@ -77,8 +77,7 @@ def _plus_rows(v0, v1, z, R, c, acol, bcol, fx, fy, cx, cy, mode, kc, use_max, s
             st = sel[t % 4]
             select_ring_row(t, h, zbuf, nbuf, kbuf, acol, bcol, c, selfw, eps, st[0, 1:w + 1],
                             st[1, 1:w + 1], st[2, 1:w + 1], None)
-            similarity_row(zbuf[(t - 1) % 3] if t > 0 else zbuf[3], zbuf[t % 3],
-                           zbuf[r % 3] if r < h else zbuf[3], sa, sb, sim[t % 4], hsum[t % 4])
+            similarity_ring_row(t, h, zbuf, sa, sb, sim, hsum)
         q = r - 2  # CRF of row q (selected rows q - 1 .. q + 1 done)
         if v0 <= q < v1:
             kr = kbuf[q % 3]
