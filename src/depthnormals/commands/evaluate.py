@@ -6,6 +6,9 @@ import argparse
 import sys
 from pathlib import Path
 
+#: Seconds of compilation on a cold numba cache, for 3f2n+ (see ``commands._firstrun``).
+FIRST_RUN_S = 75
+
 HELP = ("evaluate estimators on a dataset: results.csv, summary tables, figures "
         "(resumes an interrupted run)")
 
