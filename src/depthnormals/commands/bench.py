@@ -194,12 +194,14 @@ def run(args: argparse.Namespace) -> int:
     import numba
     import numpy as np
 
+    from .._parallel import get_num_threads
     from .._progress import Progress
     from ..analytic import DEFAULT_K, DEFAULT_SHAPE, make_scene
     from ..evaluate import machine_description
     from ..registry import estimate_normals, methods
     from .demo import parse_size
 
+    previous_threads = get_num_threads()
     names = args.methods.split(",") if args.methods else list(methods())
     sizes = [parse_size(s) for s in args.sizes.split(",")]
     thread_list = _parse_threads(args.threads)
@@ -273,7 +275,7 @@ def run(args: argparse.Namespace) -> int:
             result["runs"].append({"threads": threads, "method": name, "peer": name in PEERS,
                                    **{f"{w}x{h}_ms": row.get((h, w)) for h, w in sizes}})
     bar.close()
-    _set_threads(thread_list[0])
+    _set_threads(previous_threads)
     print(f"\nratio = ms / {REF} ms at the same size and threads (lower is faster); medians of "
           f"{args.repeats} runs after {args.warmup} warm-up runs. OpenCV FALS/SRI time apply() on "
           "precomputed points (depthTo3d not counted), ours the whole call from depth.")
