@@ -202,6 +202,9 @@ def run(args: argparse.Namespace) -> int:
     from .demo import parse_size
 
     previous_threads = get_num_threads()
+    # Start numba's thread pool before a peer loads its own TBB (Open3D ships an older one,
+    # which numba would then pick up and reject with a NumbaWarning).
+    numba.get_num_threads()
     names = args.methods.split(",") if args.methods else list(methods())
     sizes = [parse_size(s) for s in args.sizes.split(",")]
     thread_list = _parse_threads(args.threads)
