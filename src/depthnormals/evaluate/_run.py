@@ -161,8 +161,23 @@ def plan_evaluation(
 ) -> EvaluationPlan:
     """Check the arguments of an evaluation and return them as an :class:`EvaluationPlan`.
 
-    The parameters are those of :func:`run_evaluation`; ValueError/TypeError name the one
-    that is wrong.
+    Nothing is read or written. The parameters are those of :func:`run_evaluation` (the
+    dataset, output folder and run options apart).
+
+    Returns
+    -------
+    EvaluationPlan
+
+    Raises
+    ------
+    ValueError, TypeError
+        Naming the argument that is wrong and what it accepts.
+
+    Examples
+    --------
+    >>> plan = plan_evaluation("3f2n,d2nt[variant=basic]", threads=1)
+    >>> plan.labels, plan.figure_label, plan.protocol.border
+    (['3f2n', 'd2nt[variant=basic]'], 'd2nt[variant=basic]', 1)
     """
     specs = tuple(resolve_methods(methods, method_options))
     labels = [s.label for s in specs]
