@@ -248,22 +248,30 @@ _KERNEL = textwrap.dedent("""
 
 
 def test_kernel_cache_state_follows_numba(tmp_path, monkeypatch):
-    """cold before numba compiled the kernel, warm after, stale once the source changed:
-    the index files are found where numba itself writes them (NUMBA_CACHE_DIR)."""
+    """cold before numba compiled the kernels, warm after, stale once every kernel module
+    changed (one unchanged module keeps it warm: numba leaves old index files behind, so a
+    per-module rule would announce forever); the index files are found where numba itself
+    writes them (NUMBA_CACHE_DIR)."""
+    import os
+
     import numba
 
     pkg, cache = tmp_path / "pkg", tmp_path / "cache"
     pkg.mkdir()
-    (pkg / "kern.py").write_text(_KERNEL)
+    (pkg / "kern_a.py").write_text(_KERNEL)
+    (pkg / "kern_b.py").write_text(_KERNEL)
     (pkg / "plain.py").write_text("x = 1\n")
     monkeypatch.setattr(numba.config, "CACHE_DIR", str(cache))
     assert _firstrun.kernel_cache_state(pkg) == "cold"
-    env = {**__import__("os").environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(pkg)}
-    subprocess.run([sys.executable, "-c", "import kern; assert kern.plus_one(1) == 2"],
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(pkg)}
+    subprocess.run([sys.executable, "-c", "import kern_a, kern_b; "
+                    "assert kern_a.plus_one(1) == kern_b.plus_one(1) == 2"],
                    env=env, check=True, timeout=120)
-    assert list(cache.rglob("kern.*.nbi"))
+    assert list(cache.rglob("kern_a.*.nbi")) and list(cache.rglob("kern_b.*.nbi"))
     assert _firstrun.kernel_cache_state(pkg) == "warm"
-    (pkg / "kern.py").write_text(_KERNEL + "\n# edited\n")
+    (pkg / "kern_a.py").write_text(_KERNEL + "\n# edited\n")
+    assert _firstrun.kernel_cache_state(pkg) == "warm"
+    (pkg / "kern_b.py").write_text(_KERNEL + "\n# edited too\n")
     assert _firstrun.kernel_cache_state(pkg) == "stale"
 
 

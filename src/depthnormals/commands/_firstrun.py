@@ -7,11 +7,13 @@ else ``__pycache__`` beside the source (or numba's user-wide cache folder when t
 writable). An index is fresh when it was written by this numba version for the current source
 (numba stamps it with a hash of the file, or (mtime, size) in older versions).
 
-:func:`kernel_cache_state` reads only those index files (a few ms): ``"cold"`` when no kernel
-module has a fresh index (a new install, an empty cache), ``"stale"`` when a module has indexes
-but none fresh (its source changed since it was compiled), else ``"warm"``. Kernels that no
-command has compiled yet do not count, so a warm cache can still compile a method used for the
-first time; the announcement is a hint, not a promise.
+:func:`kernel_cache_state` reads only those index files (a few ms): ``"warm"`` when some kernel
+module has a fresh index, else ``"stale"`` when indexes exist but none is fresh (the package
+changed since it was compiled: an upgrade, an edit) or ``"cold"`` when there are none (a new
+install, an empty cache). The package as a whole counts, not each module: numba never deletes
+old index files, so a module no command uses would otherwise look stale forever. The price: a
+warm cache can still compile a method used for the first time; the announcement is a hint
+for the first run, not a promise about every run.
 """
 
 from __future__ import annotations
@@ -75,8 +77,8 @@ def kernel_cache_state(package_dir: str | Path | None = None) -> str:
     Returns
     -------
     str
-        ``"cold"``: no kernel module has a fresh cache index; ``"stale"``: some module has
-        index files, none of them fresh (its source changed); ``"warm"`` otherwise.
+        ``"warm"``: some kernel module has a fresh cache index; ``"stale"``: index files
+        exist but none is fresh (the sources changed since); ``"cold"``: no index at all.
     """
     import numba
 
@@ -92,9 +94,9 @@ def kernel_cache_state(package_dir: str | Path | None = None) -> str:
             any_fresh = True
         else:
             stale = True
-    if stale:
-        return "stale"
-    return "warm" if any_fresh else "cold"
+    if any_fresh:
+        return "warm"
+    return "stale" if stale else "cold"
 
 
 def announce_first_run(command: str, seconds: float | None) -> bool:
