@@ -269,17 +269,47 @@ def test_torusknot_reference_values(shared_data, tmp_path):
 
 
 def test_signed_border_score90_reach_the_rows(tiny_3f2n, tmp_path):
-    import numba
-
-    before = numba.get_num_threads()
-    base = run_evaluation(tiny_3f2n, "3f2n", tmp_path / "a", figures=0, frames=1, threads=1)
-    assert base.settings["timing"]["numba_threads"] == 1
-    assert numba.get_num_threads() == before          # restored after the run
-    other = run_evaluation(tiny_3f2n, "3f2n", tmp_path / "a", figures=0, frames=1, border=5,
-                           folded=False, invalid="score90")
+    base = run_evaluation(tiny_3f2n, "3f2n", tmp_path / "a", figures=0, frames=1)
+    other = run_evaluation(tiny_3f2n, "3f2n", tmp_path / "a", figures=0, frames=1,
+                           protocol=Protocol(border=5, folded=False, invalid="score90"))
     assert other.reused == 0 and other.computed == 1   # a new protocol is not reused
     assert other.rows[0]["scored"] < base.rows[0]["scored"]
     assert other.rows[0]["count"] == other.rows[0]["scored"]
+    assert other.settings["protocol"]["border"] == 5
+    # the protocol options moved into Protocol: the old keywords say so
+    with pytest.raises(TypeError, match=r"protocol=Protocol\(border=5, folded=False\)"):
+        run_evaluation(tiny_3f2n, "3f2n", tmp_path / "b", border=5, folded=False)
+    with pytest.raises(TypeError, match="unexpected keyword"):
+        run_evaluation(tiny_3f2n, "3f2n", tmp_path / "b", figurs=0)
+    assert not (tmp_path / "b").exists()
+
+
+def test_threads_drive_the_estimators_and_are_recorded(tiny_3f2n, tmp_path, monkeypatch):
+    """threads= sets the row-band pool the estimators use (not only numba's), records it in
+    settings.json and restores the previous count afterwards."""
+    import depthnormals.registry as registry
+
+    before = dn.get_num_threads()
+    want = 1 if before != 1 else 2
+    real = registry.estimate_normals
+    seen: list[int] = []
+
+    def spy(*args, **kwargs):
+        seen.append(dn.get_num_threads())
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(registry, "estimate_normals", spy)
+    res = run_evaluation(tiny_3f2n, "3f2n", tmp_path, figures=0, frames=1, threads=want)
+    assert seen and set(seen) == {want}
+    assert res.settings["timing"]["threads"] == want
+    saved = json.loads((tmp_path / "settings.json").read_text())
+    assert saved["timing"]["threads"] == want
+    assert dn.get_num_threads() == before          # restored after the run
+    seen.clear()
+    res = run_evaluation(tiny_3f2n, "3f2n", tmp_path / "default", figures=0, frames=1)
+    assert set(seen) == {before} and res.settings["timing"]["threads"] == before
+    with pytest.raises(ValueError, match="threads must be"):
+        run_evaluation(tiny_3f2n, "3f2n", tmp_path / "c", figures=0, threads=0)
 
 
 def test_resume_after_injected_interruption(tiny_3f2n, tmp_path, monkeypatch):
@@ -439,16 +469,19 @@ def test_generated_benchmark_equals_normal_metrics(tmp_path):
     assert groups["outdoor/gaussian"]["d2nt"]["e_A"] == by[key]["mean_deg"]
 
 
-@pytest.mark.parametrize("with_tqdm", [True, False])
-def test_progress_bar_or_plain_lines(tiny_3f2n, tmp_path, monkeypatch, capsys, with_tqdm):
+@pytest.mark.parametrize("terminal, with_tqdm", [(True, True), (False, True), (True, False)])
+def test_progress_bar_or_plain_lines(tiny_3f2n, tmp_path, monkeypatch, capsys, terminal,
+                                     with_tqdm):
+    """A tqdm bar on a terminal; one plain line per frame in a pipe or log (or without tqdm)."""
     if with_tqdm:
         pytest.importorskip("tqdm")
     else:
         monkeypatch.setitem(sys.modules, "tqdm", None)     # import tqdm -> ImportError
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: terminal, raising=False)
     run_evaluation(tiny_3f2n, "d2nt", tmp_path, figures=0, frames=2, progress=True)
     err = capsys.readouterr().err
-    if with_tqdm:
-        assert "evaluate" in err and "2/2" in err
+    if terminal and with_tqdm:
+        assert "evaluate" in err and "2/2" in err and "\r" in err
     else:
         assert err.splitlines() == [
             "evaluate: frame 1 Easy/box/000001 (1 computed, 0 reused)",

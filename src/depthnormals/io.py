@@ -141,13 +141,20 @@ def read_intrinsics(path: str | Path) -> Intrinsics:
     suffix = path.suffix.lower()
     text = path.read_text()
     if suffix == ".json":
-        data = json.loads(text)
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{path}: not valid JSON ({exc.msg}, line {exc.lineno} column "
+                             f"{exc.colno}); {_INTRINSICS_EXAMPLE}") from exc
     elif suffix in (".yaml", ".yml"):
         try:
             import yaml
         except ImportError as exc:
             raise ImportError("reading YAML needs PyYAML: pip install 'depthnormals[io]'") from exc
-        data = yaml.safe_load(text)
+        try:
+            data = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            raise ValueError(f"{path}: not valid YAML ({exc}); {_INTRINSICS_EXAMPLE}") from exc
     elif suffix == ".txt":
         values = text.split()
         try:
@@ -161,11 +168,19 @@ def read_intrinsics(path: str | Path) -> Intrinsics:
         for key in ("camera", "intrinsics"):
             if isinstance(data.get(key), dict):
                 data = data[key]
-        if "K" in data:
-            return as_intrinsics(np.asarray(data["K"], dtype=np.float64).reshape(3, 3))
-        if all(k in data for k in ("fx", "fy", "cx", "cy")):
-            return as_intrinsics(data)
-    raise ValueError(f"{path}: needs keys fx, fy, cx, cy or K (3x3)")
+        try:
+            if "K" in data:
+                return as_intrinsics(np.asarray(data["K"], dtype=np.float64).reshape(3, 3))
+            if all(k in data for k in ("fx", "fy", "cx", "cy")):
+                return as_intrinsics(data)
+        except (ValueError, TypeError) as exc:
+            raise type(exc)(f"{path}: {exc}; {_INTRINSICS_EXAMPLE}") from exc
+    raise ValueError(f"{path}: needs keys fx, fy, cx, cy or K (3x3); {_INTRINSICS_EXAMPLE}")
+
+
+_INTRINSICS_EXAMPLE = ('a valid file looks like {"fx": 525.0, "fy": 525.0, "cx": 319.5, '
+                       '"cy": 239.5} (pixels, 0-based principal point) or {"K": [[525.0, 0, '
+                       '319.5], [0, 525.0, 239.5], [0, 0, 1]]}')
 
 
 def normals_to_rgb8(normals: np.ndarray) -> np.ndarray:

@@ -15,6 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
+#: Seconds of compilation on a cold numba cache (see ``depthnormals.commands._firstrun``).
+FIRST_RUN_S = 90
+
 HELP = "print the 3F2N+ ablation tables (Table I / II of the paper) for a dataset folder"
 
 TABLE1_AGGREGATES = ("median", "mean", "trimean", "trimmed-mean")
@@ -48,6 +51,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="noise of the noisy analytic frames, in units of z / f (default 0.1)")
     parser.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
     parser.add_argument("--limit", type=int, default=None, help="at most this many frames")
+    parser.add_argument("--quiet", "-q", action="store_true",
+                        help="no progress on stderr (one line per frame and table-1 row group "
+                             "otherwise)")
 
 
 def analytic_frames(noise: float = 0.1, seed: int = 0) -> Iterator:
@@ -88,6 +94,7 @@ def _print(title: str, groups: list[str], rows: list[tuple[str, dict[str, list[f
 
 def run(args: argparse.Namespace) -> int:
     from .. import datasets
+    from .._progress import Progress
     from ..ddm import discontinuity_discrimination
     from ..estimators import three_filters_to_normal
 
@@ -95,6 +102,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("pass a DATASET folder or --analytic (exactly one)")
     frames = analytic_frames(args.noise, args.seed) if args.analytic else datasets.open(args.dataset)
     kernels = [k.strip() for k in args.kernels.split(",") if k.strip()]
+    bar = Progress("ablate", unit="step", enabled=not args.quiet)
     results: dict[str, dict[str, list[float]]] = {}
     groups: list[str] = []
     for i, fr in enumerate(frames):
@@ -105,6 +113,8 @@ def run(args: argparse.Namespace) -> int:
             groups.append(g)
         if args.table == 1:
             for agg in TABLE1_AGGREGATES:
+                bar.update(line=f"ablate: frame {i + 1} {g}/{fr.name}: {agg} x "
+                                f"{', '.join(kernels)} x {len(TABLE1_CURVATURES) + 1} curvatures")
                 for ker in kernels:
                     base = three_filters_to_normal(fr.depth, fr.K, kernel=ker, aggregate=agg)
                     label = f"{agg:<13} {ker:<8} none"
@@ -116,11 +126,13 @@ def run(args: argparse.Namespace) -> int:
                         label = f"{agg:<13} {ker:<8} {curv}"
                         results.setdefault(label, {}).setdefault(g, []).append(_score(n, fr))
         else:
+            bar.update(line=f"ablate: frame {i + 1} {g}/{fr.name}: {len(TABLE2_ROWS)} rows")
             base = three_filters_to_normal(fr.depth, fr.K)
             for label, opts in TABLE2_ROWS:
                 n = base if opts is None else discontinuity_discrimination(
                     base, fr.depth, fr.K, **opts)
                 results.setdefault(label, {}).setdefault(g, []).append(_score(n, fr))
+    bar.close()
     if not groups:
         raise ValueError("the dataset has no frames")
     title = ("Table 1: e_A (deg) by central tendency, gradient filter, depth curvature"

@@ -18,6 +18,8 @@ HELP = ("time every estimator at 640x480 and 512x424, single thread and all core
         "peers installed (OpenCV RgbdNormals FALS/SRI/LINE-MOD, Open3D, kornia); prints ratios")
 
 REF = "opencv-fals"
+#: Seconds of compilation on a cold numba cache (every method; see ``commands._firstrun``).
+FIRST_RUN_S = 150
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -28,8 +30,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--repeats", type=int, default=15, help="timed runs per method (median)")
     parser.add_argument("--warmup", type=int, default=2, help="untimed runs before timing")
     parser.add_argument("--threads", default="1,all",
-                        help="comma-separated thread counts for numba, OpenCV and torch; 'all' = "
-                             "every core (default 1,all)")
+                        help="comma-separated thread counts; each pins ours (numba and the "
+                             "row-band pool), OpenCV, torch and Open3D; 'all' = every core "
+                             "(default 1,all)")
     parser.add_argument("--scene", default="demo-room", help="analytic scene to time on")
     parser.add_argument("--peers", default="all",
                         help="comma-separated peers to time (opencv-fals, opencv-sri, "
@@ -37,6 +40,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "'none'")
     parser.add_argument("--json", type=str, default=None, metavar="PATH",
                         help="also write every number and the machine description as JSON")
+    parser.add_argument("--quiet", "-q", action="store_true",
+                        help="no progress on stderr (one line per timed method otherwise)")
 
 
 def _median_ms(fn: Callable[[], object], repeats: int, warmup: int = 2) -> float:
@@ -135,16 +140,35 @@ PEERS: dict[str, Callable] = {
 }
 
 
-def _set_threads(n: int) -> None:
+def _set_threads(n: int) -> dict[str, int | str]:
+    """Pin every library that times: ours (row-band pool and numba), OpenCV, torch, Open3D.
+
+    Libraries not imported are left alone (a peer imports its library before timing). Returns
+    what each library was set to, or why it could not be, for the JSON report.
+    """
     import sys
 
-    from .._parallel import set_num_threads
+    from .._parallel import get_num_threads, set_num_threads
 
     set_num_threads(n)  # our row-band pool and numba's own threads
+    pinned: dict[str, int | str] = {"depthnormals": get_num_threads()}
     if "cv2" in sys.modules:
-        sys.modules["cv2"].setNumThreads(n)
+        cv2 = sys.modules["cv2"]
+        cv2.setNumThreads(n)
+        pinned["opencv"] = int(cv2.getNumThreads())
     if "torch" in sys.modules:
-        sys.modules["torch"].set_num_threads(n)
+        torch = sys.modules["torch"]
+        torch.set_num_threads(n)
+        pinned["torch"] = int(torch.get_num_threads())
+    o3d = sys.modules.get("open3d")
+    if o3d is not None:
+        utility = getattr(o3d, "utility", None)
+        if hasattr(utility, "set_max_threads"):  # Open3D >= 0.20: bounds its TBB pool
+            utility.set_max_threads(n)
+            pinned["open3d"] = int(utility.get_max_threads())
+        else:
+            pinned["open3d"] = "not pinned: this Open3D has no utility.set_max_threads"
+    return pinned
 
 
 def _parse_threads(text: str) -> list[int]:
@@ -170,11 +194,17 @@ def run(args: argparse.Namespace) -> int:
     import numba
     import numpy as np
 
+    from .._parallel import get_num_threads
+    from .._progress import Progress
     from ..analytic import DEFAULT_K, DEFAULT_SHAPE, make_scene
     from ..evaluate import machine_description
     from ..registry import estimate_normals, methods
     from .demo import parse_size
 
+    previous_threads = get_num_threads()
+    # Start numba's thread pool before a peer loads its own TBB (Open3D ships an older one,
+    # which numba would then pick up and reject with a NumbaWarning).
+    numba.get_num_threads()
     names = args.methods.split(",") if args.methods else list(methods())
     sizes = [parse_size(s) for s in args.sizes.split(",")]
     thread_list = _parse_threads(args.threads)
@@ -206,14 +236,19 @@ def run(args: argparse.Namespace) -> int:
           f"OpenCV {cv_version or 'not installed'}; threads: {', '.join(map(str, thread_list))}")
     result: dict = {"machine": machine_description(), "scene": args.scene,
                     "repeats": args.repeats, "warmup": args.warmup, "reference": REF,
-                    "peers_missing": notes, "peers_timed": {}, "runs": []}
+                    "peers_missing": notes, "peers_timed": {}, "runs": [], "threads_pinned": {}}
+    bar = Progress("bench", total=len(thread_list) * len(sizes) * (len(peer_names) + len(names)),
+                   unit="timing", enabled=not args.quiet)
     for threads in thread_list:
-        _set_threads(threads)
+        result["threads_pinned"][str(threads)] = _set_threads(threads)
         table: dict[str, dict[tuple[int, int], float]] = {}
         for h, w in sizes:
             K = DEFAULT_K.scaled(w / DEFAULT_SHAPE[1])
             depth = make_scene(args.scene).render(K, (h, w)).depth.astype(np.float32)
             for p in peer_names:
+                bar.update(f"{threads} thread(s) {w}x{h} {p}",
+                           line=f"bench: {bar.count + 1}/{bar.total} {p} at {w}x{h}, "
+                                f"{threads} thread(s)")
                 try:
                     fn, what = PEERS[p](depth, K.matrix)
                     table.setdefault(p, {})[(h, w)] = _median_ms(fn, args.repeats, args.warmup)
@@ -221,6 +256,9 @@ def run(args: argparse.Namespace) -> int:
                 except Exception as exc:  # a peer's own failure must not stop the bench
                     notes[p] = f"failed: {type(exc).__name__}: {exc}"
             for name in names:
+                bar.update(f"{threads} thread(s) {w}x{h} {name}",
+                           line=f"bench: {bar.count + 1}/{bar.total} {name} at {w}x{h}, "
+                                f"{threads} thread(s)")
                 table.setdefault(name, {})[(h, w)] = _median_ms(
                     lambda n=name, d=depth, k=K: estimate_normals(d, k, method=n),
                     args.repeats, args.warmup)
@@ -239,7 +277,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"{name:<20}{cells}")
             result["runs"].append({"threads": threads, "method": name, "peer": name in PEERS,
                                    **{f"{w}x{h}_ms": row.get((h, w)) for h, w in sizes}})
-    _set_threads(thread_list[0])
+    bar.close()
+    _set_threads(previous_threads)
     print(f"\nratio = ms / {REF} ms at the same size and threads (lower is faster); medians of "
           f"{args.repeats} runs after {args.warmup} warm-up runs. OpenCV FALS/SRI time apply() on "
           "precomputed points (depthTo3d not counted), ours the whole call from depth.")

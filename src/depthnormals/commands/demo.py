@@ -7,6 +7,11 @@ import json
 import time
 from pathlib import Path
 
+#: Top of the error colour scale of the demo picture (degrees).
+ERROR_VMAX_DEG = 30.0
+#: Seconds of compilation on a cold numba cache (see ``depthnormals.commands._firstrun``).
+FIRST_RUN_S = 50
+
 HELP = ("render a built-in analytic scene, estimate its normals, print the error metrics and "
         "write a picture (depth | ground truth | estimate | angular error)")
 
@@ -29,6 +34,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the metrics as JSON")
 
 
+def demo_picture(depth, truth, estimate, error, *, label: str):
+    """Depth | ground truth | estimate | angular error, titled, colour bars under depth (metres)
+    and error (degrees, 0 to :data:`ERROR_VMAX_DEG`); RGB uint8."""
+    import numpy as np
+
+    from ..viz import colorize, error_to_rgb8, normals_to_rgb8, titled_panel
+
+    z = np.where(depth > 0, depth, np.nan)
+    ok = np.isfinite(z)
+    lo, hi = (np.percentile(z[ok], [1, 99]) if ok.any() else (0.0, 1.0))
+    return titled_panel(
+        [colorize(z, vmin=lo, vmax=hi, cmap="viridis"), normals_to_rgb8(truth),
+         normals_to_rgb8(estimate), error_to_rgb8(error, vmax=ERROR_VMAX_DEG)],
+        ["depth (m)", "ground truth", f"estimate {label}", "angular error (deg)"],
+        colorbars=[{"vmin": float(lo), "vmax": float(hi), "cmap": "viridis", "label": "depth (m)"},
+                   None, None,
+                   {"vmin": 0.0, "vmax": ERROR_VMAX_DEG, "cmap": "inferno",
+                    "label": "angular error (deg)"}])
+
+
 def parse_size(text: str) -> tuple[int, int]:
     """``"640x480"`` -> ``(480, 640)`` (rows, columns)."""
     try:
@@ -47,7 +72,6 @@ def run(args: argparse.Namespace) -> int:
     from ..io import write_png
     from ..metrics import angular_error, normal_metrics
     from ..registry import DEFAULT_METHOD, estimate_normals
-    from ..viz import colorize, error_to_rgb8, normals_to_rgb8, panel
 
     h, w = parse_size(args.size)
     K = DEFAULT_K.scaled(w / DEFAULT_SHAPE[1]) if (h, w) != DEFAULT_SHAPE else DEFAULT_K
@@ -71,12 +95,7 @@ def run(args: argparse.Namespace) -> int:
         results[method] = {**normal_metrics(n, render.normals).as_dict(), "ms": ms}
     main = methods[0]
     err = angular_error(estimates[main], render.normals)
-    picture = panel([
-        colorize(np.where(depth > 0, depth, np.nan), cmap="viridis"),
-        normals_to_rgb8(render.normals),
-        normals_to_rgb8(estimates[main]),
-        error_to_rgb8(err, vmax=30.0),
-    ])
+    picture = demo_picture(depth, render.normals, estimates[main], err, label=main)
     write_png(args.output, picture)
     if args.json:
         print(json.dumps({"scene": args.scene, "size": [w, h], "noise": args.noise,
@@ -87,5 +106,6 @@ def run(args: argparse.Namespace) -> int:
     for method, r in results.items():
         print(f"{method:<16}{r['mean']:8.3f}{r['median']:8.3f}{r['rmse']:8.3f}"
               f"{100 * r['a11_25']:7.1f}%{100 * r['a30']:7.1f}%{100 * r['coverage']:7.1f}%{r['ms']:8.1f}")
-    print(f"wrote {args.output}: depth | ground truth | {main} | angular error (0-30 deg)")
+    print(f"wrote {args.output}: depth (m) | ground truth | {main} | angular error "
+          f"(0-{ERROR_VMAX_DEG:g} deg), titled, with colour bars")
     return 0

@@ -1,12 +1,26 @@
-"""``depthnormals estimate``: normals of one depth file."""
+"""``depthnormals estimate``: normals of one depth file.
+
+The command is two layers: :func:`add_arguments` / :func:`run` turn the command line into a
+call of :func:`estimate_file`, which does the work (read, estimate, write) and returns an
+:class:`EstimateReport`; the exit status follows from the report (:data:`EXIT_NO_VALID_PIXEL`
+when the input has no valid depth).
+"""
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 HELP = "estimate the normals of a depth image and write them (.npy, .png 16-bit, .vis.png)"
+
+#: Exit status when no pixel of the input depth is valid (see ``depthnormals --help``).
+EXIT_NO_VALID_PIXEL = 3
+#: Seconds of compilation on a cold numba cache (see ``depthnormals.commands._firstrun``).
+FIRST_RUN_S = 50
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -18,8 +32,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--method", "-m", default=None, help="estimator (see `depthnormals methods`)")
     parser.add_argument("--depth-scale", type=float, default=None,
                         help="metres per unit of integer depth (e.g. 0.001 for millimetres)")
+    parser.add_argument("--shape", type=parse_shape, default=None, metavar="H,W",
+                        help="rows,columns of a raw .bin depth file (default 480,640, the 3F2N "
+                             "format); for other formats it must match the file")
     parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                         help="estimator option, e.g. --option kernel=sobel (repeatable; JSON values)")
+
+
+def parse_shape(text: str) -> tuple[int, int]:
+    """``"480,640"`` -> ``(480, 640)`` (rows, columns)."""
+    try:
+        h, w = (int(x) for x in text.split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(
+            f"--shape must be H,W (rows,columns), e.g. 480,640; got {text!r}") from exc
+    if h < 1 or w < 1:
+        raise argparse.ArgumentTypeError(f"--shape must be positive; got {text!r}")
+    return h, w
 
 
 def parse_options(items: list[str]) -> dict:
@@ -36,20 +65,58 @@ def parse_options(items: list[str]) -> dict:
     return out
 
 
-def run(args: argparse.Namespace) -> int:
+@dataclass(frozen=True)
+class EstimateReport:
+    """What :func:`estimate_file` did: output path, size, method, valid inputs and outputs, time."""
+
+    output: Path
+    shape: tuple[int, int]
+    method: str
+    valid_depth: int
+    valid_normals: int
+    ms: float
+
+
+def estimate_file(depth_path: Path, intrinsics_path: Path, output: Path, *,
+                  method: str | None = None, depth_scale: float | None = None,
+                  shape: tuple[int, int] | None = None,
+                  options: dict[str, Any] | None = None) -> EstimateReport:
+    """Read one depth file and its intrinsics, estimate the normals, write them atomically.
+
+    The normals are written even when no depth pixel is valid (then they are all NaN);
+    ``valid_depth == 0`` in the report says so.
+    """
     import time
+
+    import numpy as np
 
     from ..io import read_depth, read_intrinsics, write_normals
     from ..registry import DEFAULT_METHOD, estimate_normals
 
-    depth = read_depth(args.depth, depth_scale=args.depth_scale)
-    K = read_intrinsics(args.intrinsics)
-    method = args.method or DEFAULT_METHOD
+    depth = read_depth(depth_path, depth_scale=depth_scale, shape=shape)
+    if shape is not None and depth.shape != tuple(shape):
+        raise ValueError(f"{depth_path} holds a {depth.shape[0]} x {depth.shape[1]} depth map; "
+                         f"--shape says {shape[0]} x {shape[1]}")
+    K = read_intrinsics(intrinsics_path)
+    method = method or DEFAULT_METHOD
     t0 = time.perf_counter()
-    normals = estimate_normals(depth, K, method=method, **parse_options(args.option))
+    normals = estimate_normals(depth, K, method=method, **(options or {}))
     ms = (time.perf_counter() - t0) * 1e3
-    write_normals(args.output, normals)
-    valid = int((normals[..., 0] == normals[..., 0]).sum())
-    print(f"{args.output}: {normals.shape[1]}x{normals.shape[0]} normals by {method} "
-          f"({valid} valid pixels, {ms:.1f} ms)")
+    write_normals(output, normals)
+    valid_depth = int(np.count_nonzero(np.isfinite(depth) & (depth > 0)))
+    valid = int(np.count_nonzero(np.isfinite(normals[..., 0])))
+    return EstimateReport(output, depth.shape, method, valid_depth, valid, ms)
+
+
+def run(args: argparse.Namespace) -> int:
+    rep = estimate_file(args.depth, args.intrinsics, args.output, method=args.method,
+                        depth_scale=args.depth_scale, shape=args.shape,
+                        options=parse_options(args.option))
+    print(f"{rep.output}: {rep.shape[1]}x{rep.shape[0]} normals by {rep.method} "
+          f"({rep.valid_normals} valid pixels, {rep.ms:.1f} ms)")
+    if rep.valid_depth == 0:
+        print(f"depthnormals estimate: warning: no pixel of {args.depth} holds a valid depth "
+              "(all are 0, negative, NaN or inf), so every normal is NaN; check the file, "
+              "--depth-scale and --shape", file=sys.stderr)
+        return EXIT_NO_VALID_PIXEL
     return 0

@@ -3,7 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
+
+#: Seconds of compilation on a cold numba cache, for 3f2n+ (see ``commands._firstrun``).
+FIRST_RUN_S = 75
 
 HELP = ("evaluate estimators on a dataset: results.csv, summary tables, figures "
         "(resumes an interrupted run)")
@@ -39,13 +43,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(0-based), e.g. 0,2: indoor/room-03/clean -> indoor/clean")
     parser.add_argument("--figures", type=int, default=3,
                         help="Fig. 3 layouts for the first frame of up to N groups (default 3; "
-                             "0: no figures)")
+                             "0: no figures; skipped with a warning when matplotlib is missing)")
     parser.add_argument("--figure-method", default=None,
                         help="method whose estimate is panel (iii) (default: the last)")
     parser.add_argument("--error-vmax", type=float, default=20.0,
                         help="top of the error colour scale in degrees (default 20)")
     parser.add_argument("--threads", type=int, default=None,
-                        help="numba threads (default: all cores)")
+                        help="threads of the estimators (default: all cores; recorded in "
+                             "settings.json)")
     parser.add_argument("--no-resume", action="store_true",
                         help="recompute every (frame, method) even if an earlier run finished it")
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
@@ -73,17 +78,34 @@ def _levels(text: str | None) -> list[int] | None:
         raise ValueError(f"--group-levels {text!r} must be comma-separated integers") from exc
 
 
-def run(args: argparse.Namespace) -> int:
-    from ..evaluate import run_evaluation, summary_markdown
+def figures_or_skip(requested: int, command: str = "evaluate") -> int:
+    """``requested`` if matplotlib can be imported, else 0 after ONE warning on stderr."""
+    if requested <= 0:
+        return requested
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        print(f"depthnormals {command}: warning: matplotlib is not installed, so the figures "
+              "are skipped (tables and results are written as usual); pip install "
+              "'depthnormals[plot]' to draw them, or pass --figures 0 to silence this",
+              file=sys.stderr)
+        return 0
+    return requested
 
+
+def run(args: argparse.Namespace) -> int:
+    from ..evaluate import Protocol, run_evaluation, summary_markdown
+
+    protocol = Protocol(folded=args.errors == "folded", border=args.border, invalid=args.invalid,
+                        edge_radius=args.edge_radius, edge_angle=args.edge_angle,
+                        depth_jump=args.depth_jump)
     res = run_evaluation(
-        args.dataset, args.methods, args.out, folded=args.errors == "folded",
-        border=args.border, invalid=args.invalid, edge_radius=args.edge_radius,
-        edge_angle=args.edge_angle, depth_jump=args.depth_jump,
+        args.dataset, args.methods, args.out, protocol=protocol,
         method_options=parse_method_options(args.option), frames=args.frames,
         group_levels=_levels(args.group_levels),
-        figures=args.figures, figure_method=args.figure_method, error_vmax=args.error_vmax,
-        threads=args.threads, resume=not args.no_resume, progress=not args.quiet,
+        figures=figures_or_skip(args.figures), figure_method=args.figure_method,
+        error_vmax=args.error_vmax, threads=args.threads, resume=not args.no_resume,
+        progress=not args.quiet,
     )
     labels = [m["label"] for m in res.settings["methods"]]
     table = summary_markdown(res.summary, labels).split("\n\n## ")[1]

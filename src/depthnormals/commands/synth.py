@@ -5,6 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+#: Seconds of compilation on a cold numba cache (the rasteriser; see ``commands._firstrun``).
+FIRST_RUN_S = 20
+
 HELP = "render a synthetic benchmark: procedural indoor/outdoor scenes, clean and noisy depth"
 
 
@@ -29,7 +32,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="camera poses must have their median depth in LO..HI metres (default 0.8,4.0)")
     parser.add_argument("--export-3f2n", type=Path, default=None, metavar="DIR",
                         help="also export the clean frames to the 3F2N format in DIR")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--no-progress", action="store_true",
+                        help="no progress on stderr (a bar on a terminal, one line per view otherwise)")
 
 
 def run(args: argparse.Namespace) -> int:

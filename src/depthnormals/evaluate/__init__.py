@@ -2,7 +2,8 @@
 
 :func:`run_evaluation` runs estimators on every frame and writes ``results.csv`` (one row
 per frame and method), per-group summaries (markdown and JSON), figures and a sidecar JSON
-of its settings; an interrupted run resumes. The pieces are public too: :class:`Protocol`
+of its settings; an interrupted run resumes. :func:`plan_evaluation` checks its arguments
+into an :class:`EvaluationPlan` without running anything. The pieces are public too: :class:`Protocol`
 (which pixels count and how), :func:`score_frame`, :func:`discontinuity_mask`,
 :func:`summarize`.
 
@@ -22,7 +23,7 @@ from ._protocol import (
     score_frame,
     scoring_mask,
 )
-from ._run import EvaluationResult, run_evaluation
+from ._run import EvaluationPlan, EvaluationResult, plan_evaluation, run_evaluation
 from ._store import FIELDS, read_results_csv
 from ._summary import (
     ALL_GROUPS,
@@ -38,6 +39,7 @@ __all__ = [
     "FIELDS",
     "HIST_BIN_DEG",
     "INVALID_POLICIES",
+    "EvaluationPlan",
     "EvaluationResult",
     "FrameScore",
     "MethodSpec",
@@ -46,6 +48,7 @@ __all__ = [
     "group_levels_key",
     "machine_description",
     "parse_method_spec",
+    "plan_evaluation",
     "pooled_median",
     "read_results_csv",
     "resolve_methods",

@@ -35,8 +35,10 @@ def plot_fig3(path: str | Path, depth: np.ndarray, truth: np.ndarray, mask: np.n
               crop: bool = True, dpi: int = 110) -> None:
     """One row in the paper's Fig. 3 layout, written as PNG atomically.
 
-    Panels: (i) depth, (ii) ground-truth normals, (iii) the estimate of ``estimate_label``,
-    then one angular-error map per method on a shared colour scale [0, ``vmax``] degrees.
+    Panels, each titled: (i) depth with a colour bar in the dataset's units (metres for metric
+    data: the 3F2N scenes use their own), (ii) ground-truth normals,
+    (iii) the estimate of ``estimate_label``, then one angular-error map per method on a
+    shared colour scale [0, ``vmax``] degrees with its colour bar.
     Normals are drawn as RGB = (1 - n) / 2; pixels outside ``mask`` are black.
 
     Parameters
@@ -77,9 +79,13 @@ def plot_fig3(path: str | Path, depth: np.ndarray, truth: np.ndarray, mask: np.n
     lo, hi = (np.nanpercentile(z, [1, 99]) if np.any(mask) else (0.0, 1.0))
     import matplotlib
 
-    axes[0].imshow(z, cmap=matplotlib.colormaps["viridis"].with_extremes(bad="black"),
-                   vmin=lo, vmax=hi, interpolation="nearest")
+    depth_image = axes[0].imshow(z, cmap=matplotlib.colormaps["viridis"].with_extremes(bad="black"),
+                                 vmin=lo, vmax=hi, interpolation="nearest")
     axes[0].set_title("(i) depth", fontsize=8)
+    zbar = fig.colorbar(depth_image, ax=axes[0], location="bottom", fraction=0.05, pad=0.03,
+                        shrink=0.9)
+    zbar.set_label("depth (dataset units; m for metric data)", fontsize=8)
+    zbar.ax.tick_params(labelsize=7)
     shown = truth.copy()
     shown[~mask] = np.nan
     axes[1].imshow(normals_to_rgb8(shown), interpolation="nearest")

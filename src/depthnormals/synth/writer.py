@@ -17,7 +17,6 @@ exist. A run into a folder made with other settings is refused (nothing is overw
 from __future__ import annotations
 
 import json
-import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -26,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from .._progress import Progress
 from ..camera import as_intrinsics
 from ..io import atomic_write, write_bytes_atomic, write_png
 from ..render import KINECT_V2, KINECT_V2_SIZE, render_mesh, render_subsamples
@@ -76,32 +76,6 @@ def _count(name: str, value: Any, minimum: int) -> int:
     return int(value)
 
 
-class _Progress:
-    def __init__(self, total: int, enabled: bool) -> None:
-        self.total, self.done, self.bar = total, 0, None
-        self.enabled = enabled
-        if enabled:
-            try:
-                from tqdm import tqdm
-            except ImportError:
-                tqdm = None
-            if tqdm is not None:
-                self.bar = tqdm(total=total, desc="synth", unit="view", file=sys.stderr)
-
-    def update(self) -> None:
-        self.done += 1
-        if self.bar is not None:
-            self.bar.update(1)
-        elif self.enabled:
-            print(f"\rsynth: {self.done}/{self.total} views", end="", file=sys.stderr, flush=True)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-        elif self.enabled:
-            print(file=sys.stderr)
-
-
 def generate(out: str | Path, *, indoor: int = 10, outdoor: int = 10, views: int = 25, seed: int = 0,
              noise: Sequence[str] = ("kinect_v2",), meshes: Sequence[str | Path] = (),
              K: Any = KINECT_V2, size: tuple[int, int] = KINECT_V2_SIZE, near: float = 0.05,
@@ -137,7 +111,7 @@ def generate(out: str | Path, *, indoor: int = 10, outdoor: int = 10, views: int
     constraints : PoseConstraints, optional, keyword-only
         Camera acceptance rules (default ``PoseConstraints()``).
     progress : bool, keyword-only
-        Show a progress bar on stderr (tqdm if installed, else a counter).
+        Report progress on stderr (a tqdm bar on a terminal, else one line per view).
 
     Returns
     -------
@@ -228,7 +202,7 @@ def generate(out: str | Path, *, indoor: int = 10, outdoor: int = 10, views: int
     except OSError as exc:
         raise OSError(f"cannot write to output folder {root}: {exc.strerror or exc}") from exc
 
-    bar = _Progress(len(plan) * views, progress)
+    bar = Progress("synth", total=len(plan) * views, unit="view", enabled=progress)
     written = skipped = 0
     t_render = 0.0
     try:
