@@ -162,3 +162,25 @@ def test_open_refuses_options_a_format_does_not_take(tmp_path):
         list(open_dataset(root, format="tum2"))
     with pytest.raises(ValueError, match="no known dataset layout"):
         list(open_dataset(tmp_path / "scene0000_00" / "pose"))
+
+
+def test_replica_nice_slam_layout(tmp_path):
+    from depthnormals.datasets import REPLICA_INTRINSICS
+
+    root = tmp_path / "room0"
+    raws = []
+    for i in range(2):
+        raw = np.round(plane_depth(REPLICA_INTRINSICS, (680, 1200), 2.0 + i) * 6553.5)
+        raw[raw > 65535] = 0
+        write_png16(root / "results" / f"depth{i:06d}.png", raw)
+        raws.append(raw)
+    poses = np.stack([np.eye(4) + 0.1 * i for i in range(2)])
+    np.savetxt(root / "traj.txt", poses.reshape(2, 16))
+    assert detect_format(root) == "replica"
+    frames = list(open_dataset(root))
+    assert [f.name for f in frames] == ["000000", "000001"] and frames[0].normals is None
+    f = frames[1]
+    assert np.array_equal(f.K, [[600, 0, 599.5], [0, 600, 339.5], [0, 0, 1]])
+    assert np.array_equal(f.depth, (raws[1] / 6553.5).astype(np.float32))
+    assert np.array_equal(f.meta["pose"], poses[1])
+    assert angle(fitted_normal(f.depth, f.K), N_TRUE) < 0.05

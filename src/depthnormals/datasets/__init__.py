@@ -10,6 +10,7 @@ from ._frame import Frame
 from .hypersim import is_hypersim, read_hypersim
 from .kitti import is_kitti, read_kitti
 from .nyu import is_nyu, read_nyu
+from .replica import REPLICA_INTRINSICS, is_replica, read_replica
 from .scannet import is_scannet, read_scannet
 from .ssn import is_ssn, read_ssn
 from .synthetic import is_synthetic, read_synthetic
@@ -18,6 +19,7 @@ from .tum import TUM_INTRINSICS, is_tum, read_tum
 
 __all__ = [
     "FORMATS",
+    "REPLICA_INTRINSICS",
     "TUM_INTRINSICS",
     "Frame",
     "detect_format",
@@ -26,6 +28,7 @@ __all__ = [
     "read_hypersim",
     "read_kitti",
     "read_nyu",
+    "read_replica",
     "read_scannet",
     "read_ssn",
     "read_synthetic",
@@ -42,6 +45,7 @@ _READERS: dict[str, tuple[Any, Any, tuple[str, ...]]] = {
     "kitti": (is_kitti, read_kitti, ("intrinsics", "depth_scale")),
     "nyu": (is_nyu, read_nyu, ("intrinsics",)),
     "hypersim": (is_hypersim, read_hypersim, ()),
+    "replica": (is_replica, read_replica, ("intrinsics", "depth_scale")),
 }
 #: The format names :func:`open` accepts as ``format=``, in detection order.
 FORMATS = tuple(_READERS)
@@ -104,7 +108,8 @@ def detect_format(path: str | Path) -> str:
         "depth/*.bin) or a folder of them, TUM RGB-D (depth.txt or associations.txt + depth/), "
         "ScanNet export (depth/*.png + intrinsic/intrinsic_depth.txt), KITTI depth (proj_depth/ "
         "or groundtruth_depth/ + intrinsics/), NYU Depth v2 labeled .mat (HDF5 with 'depths'), "
-        "Hypersim (*_geometry_hdf5/frame.IIII.depth_meters.hdf5); pass format= to force one"
+        "Hypersim (*_geometry_hdf5/frame.IIII.depth_meters.hdf5), Replica renders as NICE-SLAM "
+        "publishes them (results/depth*.png); pass format= to force one"
     )
 
 
@@ -120,9 +125,10 @@ def open(path: str | Path, *, format: str | None = None, intrinsics: Any = None,
         One of :data:`FORMATS`; default: detected from the layout.
     intrinsics : str, Intrinsics, (fx, fy, cx, cy), 3x3 array or path, optional
         Camera (or preset name, e.g. ``"fr1"`` for TUM) for the formats that take one (TUM,
-        ScanNet, KITTI, NYU); an error for the others, whose files carry their camera.
+        ScanNet, KITTI, NYU, Replica); an error for the others, whose files carry their camera.
     depth_scale : float, optional
-        Metres per PNG unit for TUM, ScanNet and KITTI (defaults: 1/5000, 1/1000, 1/256).
+        Metres per PNG unit for TUM, ScanNet, KITTI and Replica (defaults: 1/5000, 1/1000,
+        1/256, 1/6553.5).
 
     Each format's own reader (``read_tum``, ``read_kitti``, ...) takes further options.
     Recognised, in this order:
@@ -134,7 +140,8 @@ def open(path: str | Path, *, format: str | None = None, intrinsics: Any = None,
     - a 3F2N scene folder (``params.txt`` + ``depth/*.bin``; image size from the normal
       PNGs), or a folder of such scenes (e.g. ``Easy/``, or the root with
       ``Easy/Medium/Hard``), groups the scene folder relative to ``path``;
-    - TUM RGB-D, ScanNet export, KITTI depth, NYU Depth v2 labeled ``.mat`` and Hypersim:
+    - TUM RGB-D, ScanNet export, KITTI depth, NYU Depth v2 labeled ``.mat``, Hypersim and
+      Replica renders (NICE-SLAM layout):
       see docs/datasets.md and each reader. Their frames carry ``normals=None`` when the
       dataset has no ground-truth normals (all but Hypersim).
 
