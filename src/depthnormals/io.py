@@ -320,6 +320,12 @@ def to_open3d(depth: Any, K: Any, normals: Any, *, colors: Any = None) -> Any:
         ``points`` from :func:`depthnormals.backproject` (float64), ``normals`` as given,
         ``colors`` scaled to [0, 1]; OpenCV camera frame, row-major pixel order. Needs the
         ``open3d`` extra (``pip install 'depthnormals[open3d]'``, which installs ``open3d-cpu``).
+
+    Notes
+    -----
+    Open3D 0.20 bundles TBB 2021.5. Once it is loaded, numba's first parallel kernel warns
+    (``NumbaWarning``) that this TBB is too old and picks another threading layer; results
+    are unaffected. Our tests therefore use Open3D in a subprocess.
     """
     try:
         import open3d as o3d
