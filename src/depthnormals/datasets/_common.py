@@ -12,7 +12,17 @@ from .._png import read_png
 from ..camera import Intrinsics, as_intrinsics
 from ..io import read_intrinsics
 
-__all__ = ["depth_mask", "face_camera", "read_depth_png", "resolve_intrinsics"]
+__all__ = ["depth_mask", "face_camera", "h5py_module", "read_depth_png", "resolve_intrinsics"]
+
+
+def h5py_module() -> Any:
+    """h5py, imported on first use (NYU .mat and Hypersim files); a clear error without it."""
+    try:
+        import h5py
+    except ImportError as exc:
+        raise ImportError("reading NYU .mat and Hypersim files needs h5py: "
+                          "pip install 'depthnormals[io]'") from exc
+    return h5py
 
 
 def resolve_intrinsics(intrinsics: Any, presets: Mapping[str, Intrinsics], *, what: str) -> Intrinsics:

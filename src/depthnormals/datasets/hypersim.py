@@ -30,9 +30,8 @@ from typing import Any
 import numpy as np
 
 from ..camera import Intrinsics
-from ._common import face_camera
+from ._common import face_camera, h5py_module
 from ._frame import Frame
-from .nyu import _h5py
 
 __all__ = ["HYPERSIM_DEFAULT_M_CAM_FROM_UV", "hypersim_camera", "is_hypersim", "read_hypersim"]
 
@@ -122,7 +121,7 @@ def _find_csv(start: Path) -> Path | None:
 
 
 def _read_h5(path: Path) -> np.ndarray:
-    with _h5py().File(path, "r") as f:
+    with h5py_module().File(path, "r") as f:
         if "dataset" not in f:
             raise ValueError(f"{path}: no 'dataset' array (keys: {sorted(f.keys())})")
         return np.asarray(f["dataset"][...], dtype=np.float32)

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from ..camera import Intrinsics
-from ._common import depth_mask, resolve_intrinsics
+from ._common import depth_mask, h5py_module, resolve_intrinsics
 from ._frame import Frame
 
 __all__ = ["NYU_CROP", "NYU_INTRINSICS", "NYU_INTRINSICS_MATLAB", "is_nyu", "read_nyu"]
@@ -32,15 +32,6 @@ NYU_INTRINSICS = Intrinsics(NYU_INTRINSICS_MATLAB[0], NYU_INTRINSICS_MATLAB[1],
 NYU_CROP = (slice(44, 471), slice(40, 601))
 
 
-def _h5py() -> Any:
-    try:
-        import h5py
-    except ImportError as exc:
-        raise ImportError("reading NYU .mat and Hypersim files needs h5py: "
-                          "pip install 'depthnormals[io]'") from exc
-    return h5py
-
-
 def is_nyu(path: str | Path) -> bool:
     """True for an HDF5 (MATLAB v7.3) ``.mat`` file with a ``depths`` array."""
     p = Path(path)
@@ -51,7 +42,7 @@ def is_nyu(path: str | Path) -> bool:
     # v7.3 .mat files carry a 512-byte MATLAB header before the HDF5 superblock
     if b"\x89HDF\r\n\x1a\n" not in head:
         return False
-    with _h5py().File(p, "r") as f:
+    with h5py_module().File(p, "r") as f:
         return "depths" in f
 
 
@@ -89,7 +80,7 @@ def read_nyu(path: str | Path, *, intrinsics: Any = None, raw: bool = False, cro
     if crop:
         cam = Intrinsics(cam.fx, cam.fy, cam.cx - NYU_CROP[1].start, cam.cy - NYU_CROP[0].start)
     key = "rawDepths" if raw else "depths"
-    with _h5py().File(p, "r") as f:
+    with h5py_module().File(p, "r") as f:
         if key not in f:
             raise ValueError(f"{p}: no {key!r} array (keys: {sorted(f.keys())}); is this "
                              "nyu_depth_v2_labeled.mat?")
