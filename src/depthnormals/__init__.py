@@ -31,6 +31,7 @@ from .estimators import (
     three_filters_to_normal,
     vector_svd,
 )
+from .io import to_open3d
 from .metrics import NormalMetrics, angular_error, normal_metrics
 from .registry import estimate_normals, get_estimator, methods
 
@@ -63,5 +64,6 @@ __all__ = [
     "sne_roadseg",
     "sri",
     "three_filters_to_normal",
+    "to_open3d",
     "vector_svd",
 ]

@@ -28,8 +28,10 @@ __all__ = [
     "read_depth",
     "read_intrinsics",
     "read_normals",
+    "to_open3d",
     "write_bytes_atomic",
     "write_normals",
+    "write_ply",
     "write_png",
 ]
 
@@ -230,3 +232,125 @@ def read_normals(path: str | Path) -> np.ndarray:
     n /= np.linalg.norm(n, axis=-1, keepdims=True)
     n[bad] = np.nan
     return n.astype(np.float32)
+
+
+# --- point clouds -------------------------------------------------------------------------
+
+_PLY_FIELDS = (("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4"))
+_PLY_COLOURS = (("red", "u1"), ("green", "u1"), ("blue", "u1"))
+
+
+def _cloud(depth: Any, K: Any, normals: Any, colors: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Points (float64), normals and colours of the valid pixels (finite depth > 0 and finite normal)."""
+    from .camera import backproject
+
+    z = check_depth(depth)
+    n = check_normals(normals, shape=z.shape)
+    points = backproject(z, K)
+    valid = np.all(np.isfinite(points), axis=-1) & np.all(np.isfinite(n), axis=-1)
+    rgb = None
+    if colors is not None:
+        rgb = np.asarray(colors)
+        if rgb.dtype != np.uint8:
+            raise TypeError(f"colors must be uint8 (H, W, 3); got dtype {rgb.dtype}")
+        if rgb.shape != (*z.shape, 3):
+            raise ValueError(f"colors must have shape {(*z.shape, 3)} like depth; got {rgb.shape}")
+        rgb = rgb[valid]
+    return points[valid], np.asarray(n[valid]), rgb
+
+
+def write_ply(path: str | Path, depth: Any, K: Any, normals: Any, *, colors: Any = None) -> int:
+    """Write the valid pixels as a binary little-endian PLY point cloud, atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output ``.ply`` file; replaced atomically (a crash leaves the old file or none).
+    depth : array (H, W), float32 or float64
+        Planar depth in metres (integer depth: scale it first); invalid pixels are skipped.
+    K : Intrinsics, array (3, 3) or (fx, fy, cx, cy)
+        Camera intrinsics, 0-based pixel centres.
+    normals : array (H, W, 3)
+        Normals in the OpenCV camera frame (e.g. from :func:`depthnormals.estimate_normals`);
+        pixels with a NaN normal are skipped.
+    colors : array (H, W, 3) uint8, optional
+        Per-pixel RGB, written as ``uchar red green blue``.
+
+    Returns
+    -------
+    int
+        The number of points written.
+
+    Notes
+    -----
+    One ``vertex`` element with ``float x y z nx ny nz`` (float32: the points of
+    :func:`depthnormals.backproject` rounded to float32, the normals as given rounded to
+    float32), then ``uchar red green blue`` when ``colors`` is given, in row-major pixel order.
+    Camera frame: OpenCV (x right, y down, z forward), metres. Open3D, plyfile and MeshLab read it.
+
+    Examples
+    --------
+    >>> import tempfile, os
+    >>> import numpy as np
+    >>> depth = np.full((4, 5), 2.0)
+    >>> n = np.zeros((4, 5, 3), np.float32); n[..., 2] = -1
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     write_ply(os.path.join(tmp, "wall.ply"), depth, (100, 100, 2, 1.5), n)
+    20
+    """
+    points, n, rgb = _cloud(depth, K, normals, colors)
+    fields = _PLY_FIELDS + (_PLY_COLOURS if rgb is not None else ())
+    records = np.empty(len(points), dtype=list(fields))
+    for i, axis in enumerate("xyz"):
+        records[axis] = points[:, i]
+        records["n" + axis] = n[:, i]
+    if rgb is not None:
+        for i, name in enumerate(("red", "green", "blue")):
+            records[name] = rgb[:, i]
+    types = {"<f4": "float", "u1": "uchar"}
+    header = "".join([
+        "ply\n", "format binary_little_endian 1.0\n",
+        "comment depthnormals point cloud, OpenCV camera frame\n",
+        f"element vertex {len(records)}\n",
+        *(f"property {types[t]} {name}\n" for name, t in fields),
+        "end_header\n",
+    ]).encode("ascii")
+    with atomic_write(path) as fh:
+        fh.write(header)
+        fh.write(records.tobytes())
+    return len(records)
+
+
+def to_open3d(depth: Any, K: Any, normals: Any, *, colors: Any = None) -> Any:
+    """The valid pixels as an ``open3d.geometry.PointCloud`` with normals (and colours).
+
+    Parameters
+    ----------
+    depth, K, normals, colors
+        As in :func:`write_ply`.
+
+    Returns
+    -------
+    open3d.geometry.PointCloud
+        ``points`` from :func:`depthnormals.backproject` (float64), ``normals`` as given,
+        ``colors`` scaled to [0, 1]; OpenCV camera frame, row-major pixel order. Needs the
+        ``open3d`` extra (``pip install 'depthnormals[open3d]'``, which installs ``open3d-cpu``).
+
+    Notes
+    -----
+    Open3D 0.20 bundles TBB 2021.5. Once it is loaded, numba's first parallel kernel warns
+    (``NumbaWarning``) that this TBB is too old and picks another threading layer; results
+    are unaffected. Our tests therefore use Open3D in a subprocess.
+    """
+    try:
+        import open3d as o3d
+    except ImportError as exc:
+        raise ImportError("to_open3d needs Open3D: pip install 'depthnormals[open3d]' "
+                          "(or the open3d / open3d-cpu wheel)") from exc
+    points, n, rgb = _cloud(depth, K, normals, colors)
+    cloud = o3d.geometry.PointCloud()
+    cloud.points = o3d.utility.Vector3dVector(np.ascontiguousarray(points, dtype=np.float64))
+    cloud.normals = o3d.utility.Vector3dVector(np.ascontiguousarray(n, dtype=np.float64))
+    if rgb is not None:
+        cloud.colors = o3d.utility.Vector3dVector(rgb.astype(np.float64) / 255.0)
+    return cloud

@@ -4,13 +4,51 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 from ._frame import Frame
+from .hypersim import is_hypersim, read_hypersim
+from .kitti import is_kitti, read_kitti
+from .nyu import is_nyu, read_nyu
+from .replica import REPLICA_INTRINSICS, is_replica, read_replica
+from .scannet import is_scannet, read_scannet
 from .ssn import is_ssn, read_ssn
 from .synthetic import is_synthetic, read_synthetic
 from .threef2n import is_3f2n_scene, read_3f2n
+from .tum import TUM_INTRINSICS, is_tum, read_tum
 
-__all__ = ["Frame", "open", "read_3f2n", "read_ssn", "read_synthetic"]
+__all__ = [
+    "FORMATS",
+    "REPLICA_INTRINSICS",
+    "TUM_INTRINSICS",
+    "Frame",
+    "detect_format",
+    "open",
+    "read_3f2n",
+    "read_hypersim",
+    "read_kitti",
+    "read_nyu",
+    "read_replica",
+    "read_scannet",
+    "read_ssn",
+    "read_synthetic",
+    "read_tum",
+]
+
+#: format name -> (test, reader, options that :func:`open` passes on)
+_READERS: dict[str, tuple[Any, Any, tuple[str, ...]]] = {
+    "synthetic": (is_synthetic, read_synthetic, ()),
+    "ssn": (is_ssn, read_ssn, ()),
+    "3f2n": (None, None, ()),
+    "tum": (is_tum, read_tum, ("intrinsics", "depth_scale")),
+    "scannet": (is_scannet, read_scannet, ("intrinsics", "depth_scale")),
+    "kitti": (is_kitti, read_kitti, ("intrinsics", "depth_scale")),
+    "nyu": (is_nyu, read_nyu, ("intrinsics",)),
+    "hypersim": (is_hypersim, read_hypersim, ()),
+    "replica": (is_replica, read_replica, ("intrinsics", "depth_scale")),
+}
+#: The format names :func:`open` accepts as ``format=``, in detection order.
+FORMATS = tuple(_READERS)
 
 
 def _png_size(path: Path) -> tuple[int, int] | None:
@@ -29,9 +67,70 @@ def _read_3f2n_sized(scene: Path) -> Iterator[Frame]:
     yield from read_3f2n(scene, shape=size or (480, 640))
 
 
-def open(path: str | Path) -> Iterator[Frame]:
-    """Yield the frames of any dataset folder this library reads.
+def _is_3f2n(root: Path) -> bool:
+    return is_3f2n_scene(root) or any(is_3f2n_scene(p.parent) for p in root.glob("**/params.txt"))
 
+
+def _read_3f2n_tree(root: Path) -> Iterator[Frame]:
+    if is_3f2n_scene(root):
+        yield from _read_3f2n_sized(root)
+        return
+    scenes = sorted(p.parent for p in root.glob("**/params.txt") if is_3f2n_scene(p.parent))
+    for scene in scenes:
+        rel = scene.relative_to(root).as_posix()
+        for frame in _read_3f2n_sized(scene):
+            frame.group = rel
+            yield frame
+
+
+def detect_format(path: str | Path) -> str:
+    """The name of the layout found at ``path`` (one of :data:`FORMATS`).
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        If no known layout is found; the message lists the layouts tried.
+    """
+    root = Path(path)
+    if not root.exists():
+        raise FileNotFoundError(f"dataset path {root} does not exist")
+    for name, (test, _, _) in _READERS.items():
+        if name == "3f2n":
+            if root.is_dir() and _is_3f2n(root):
+                return name
+        elif test(root):
+            return name
+    raise ValueError(
+        f"{root}: no known dataset layout found; tried: depthnormals-synth (dataset.json), "
+        "SSN (<root>/indoor|outdoor/<scene>/standard_exr/*.exr), 3F2N scene (params.txt + "
+        "depth/*.bin) or a folder of them, TUM RGB-D (depth.txt or associations.txt + depth/), "
+        "ScanNet export (depth/*.png + intrinsic/intrinsic_depth.txt), KITTI depth (proj_depth/ "
+        "or groundtruth_depth/ + intrinsics/), NYU Depth v2 labeled .mat (HDF5 with 'depths'), "
+        "Hypersim (*_geometry_hdf5/frame.IIII.depth_meters.hdf5), Replica renders as NICE-SLAM "
+        "publishes them (results/depth*.png); pass format= to force one"
+    )
+
+
+def open(path: str | Path, *, format: str | None = None, intrinsics: Any = None,
+         depth_scale: float | None = None) -> Iterator[Frame]:
+    """Yield the frames of any dataset this library reads.
+
+    Parameters
+    ----------
+    path : str or Path
+        A dataset folder (or, for NYU, the ``.mat`` file).
+    format : str, optional
+        One of :data:`FORMATS`; default: detected from the layout.
+    intrinsics : str, Intrinsics, (fx, fy, cx, cy), 3x3 array or path, optional
+        Camera (or preset name, e.g. ``"fr1"`` for TUM) for the formats that take one (TUM,
+        ScanNet, KITTI, NYU, Replica); an error for the others, whose files carry their camera.
+    depth_scale : float, optional
+        Metres per PNG unit for TUM, ScanNet, KITTI and Replica (defaults: 1/5000, 1/1000,
+        1/256, 1/6553.5).
+
+    Each format's own reader (``read_tum``, ``read_kitti``, ...) takes further options.
     Recognised, in this order:
 
     - our synthetic format (``dataset.json`` with format ``depthnormals-synth``, or one of its
@@ -40,7 +139,11 @@ def open(path: str | Path) -> Iterator[Frame]:
       groups ``"<kind>/<scene>/standard"``; needs the OpenEXR package;
     - a 3F2N scene folder (``params.txt`` + ``depth/*.bin``; image size from the normal
       PNGs), or a folder of such scenes (e.g. ``Easy/``, or the root with
-      ``Easy/Medium/Hard``), groups the scene folder relative to ``path``.
+      ``Easy/Medium/Hard``), groups the scene folder relative to ``path``;
+    - TUM RGB-D, ScanNet export, KITTI depth, NYU Depth v2 labeled ``.mat``, Hypersim and
+      Replica renders (NICE-SLAM layout):
+      see docs/datasets.md and each reader. Their frames carry ``normals=None`` when the
+      dataset has no ground-truth normals (all but Hypersim).
 
     Raises
     ------
@@ -60,27 +163,20 @@ def open(path: str | Path) -> Iterator[Frame]:
     [('indoor/living_room-00/clean', (48, 64))]
     """
     root = Path(path)
-    if not root.exists():
+    if format is None:
+        format = detect_format(root)
+    elif format not in _READERS:
+        raise ValueError(f"unknown dataset format {format!r}; use one of {', '.join(FORMATS)}")
+    elif not root.exists():
         raise FileNotFoundError(f"dataset path {root} does not exist")
-    if is_synthetic(root):
-        yield from read_synthetic(root)
+    _, reader, takes = _READERS[format]
+    options = {"intrinsics": intrinsics, "depth_scale": depth_scale}
+    given = {k: v for k, v in options.items() if v is not None}
+    refused = sorted(set(given) - set(takes))
+    if refused:
+        raise TypeError(f"format {format!r} does not take {', '.join(refused)} (its files carry it); "
+                        f"it takes {', '.join(takes) or 'no options here'}")
+    if format == "3f2n":
+        yield from _read_3f2n_tree(root)
         return
-    if is_ssn(root):
-        yield from read_ssn(root)
-        return
-    if is_3f2n_scene(root):
-        yield from _read_3f2n_sized(root)
-        return
-    scenes = sorted(p.parent for p in root.glob("**/params.txt") if is_3f2n_scene(p.parent))
-    if scenes:
-        for scene in scenes:
-            rel = scene.relative_to(root).as_posix()
-            for frame in _read_3f2n_sized(scene):
-                frame.group = rel
-                yield frame
-        return
-    raise ValueError(
-        f"{root}: no known dataset layout found; tried: depthnormals-synth (dataset.json), "
-        "SSN (<root>/indoor|outdoor/<scene>/standard_exr/*.exr), 3F2N scene (params.txt + "
-        "depth/*.bin), folder of 3F2N scenes"
-    )
+    yield from reader(root, **given)

@@ -17,12 +17,13 @@ class Frame:
     ----------
     depth : ndarray (H, W), float32 or float64
         Planar depth; invalid pixels are 0 or NaN.
-    normals : ndarray (H, W, 3), float32
-        Ground-truth unit normals facing the camera, NaN where there is none.
+    normals : ndarray (H, W, 3), float32, or None
+        Ground-truth unit normals facing the camera, NaN where there is none; None for datasets
+        without ground-truth normals (TUM, ScanNet, KITTI, NYU).
     K : ndarray (3, 3), float64
         Camera matrix, 0-based pixel centres.
     mask : ndarray (H, W), bool
-        True where the ground truth is valid.
+        True where the ground truth is valid (where the depth is valid when ``normals`` is None).
     name : str
         Frame name, unique inside its group (e.g. ``"000001"``).
     group : str
@@ -32,7 +33,7 @@ class Frame:
     """
 
     depth: np.ndarray
-    normals: np.ndarray
+    normals: np.ndarray | None
     K: np.ndarray
     mask: np.ndarray
     name: str
