@@ -39,6 +39,7 @@ from ._eig3 import smallest_eigenvector
 __all__ = [
     "BORDER_POLICIES",
     "MODES",
+    "distance_map",
     "pcl_average_3d_gradient",
     "pcl_average_depth_change",
     "pcl_covariance_matrix",
@@ -67,8 +68,8 @@ _STEP, _DIAG = 5, 7
 def _distance_units(z, factor, out_units):
     """Depth-change map and its chamfer distance transform, in units of 1/5 pixel.
 
-    A pixel is marked (distance 0) when its depth is invalid or when it or a 4-neighbour
-    differs in depth by more than ``2 factor (min(z, z') + 1)``; the others get the (5, 7)
+    Both pixels of a 4-neighbour pair are marked (distance 0) when either depth is invalid
+    or they differ by more than ``2 factor (min(z, z') + 1)``; the others get the (5, 7)
     chamfer distance to the nearest marked pixel (``5 (w + h)`` when none is marked).
     Writes ``out_units`` (H, W) int64.
     """
@@ -80,16 +81,14 @@ def _distance_units(z, factor, out_units):
     for v in range(h):
         for u in range(w):
             a = z[v, u]
-            if not (a == a):
-                continue
             if u + 1 < w:
                 b = z[v, u + 1]
-                if b == b and abs(a - b) > 2.0 * factor * (min(a, b) + 1.0):
+                if not (a == a and b == b and abs(a - b) <= 2.0 * factor * (min(a, b) + 1.0)):
                     out_units[v, u] = 0
                     out_units[v, u + 1] = 0
             if v + 1 < h:
                 b = z[v + 1, u]
-                if b == b and abs(a - b) > 2.0 * factor * (min(a, b) + 1.0):
+                if not (a == a and b == b and abs(a - b) <= 2.0 * factor * (min(a, b) + 1.0)):
                     out_units[v, u] = 0
                     out_units[v + 1, u] = 0
     # forward pass (up-left, up, up-right, left), then backward (the mirror image)
@@ -395,7 +394,8 @@ def distance_map(depth: Any, *, max_depth_change_factor: float = 0.02,
     Returns
     -------
     distance : ndarray, shape (H, W), float64
-        0 on the pixels of a jump (both sides) and at invalid depth; elsewhere the chamfer
+        0 on the pixels of a jump (both sides), at invalid depth and on the 4-neighbours of
+        invalid depth (as in PCL: a pair with an invalid pixel is a jump); elsewhere the chamfer
         distance (straight step 1, diagonal step 1.4) to the nearest of them; ``H + W`` when
         there is none.
     """
@@ -423,7 +423,7 @@ def pcl_integral_image(depth: Any, K: Any, *, mode: str = "average-3d-gradient",
     depth : array_like, shape (H, W)
         Planar depth z in metres (PCL's thresholds are metric: pass ``depth_scale`` for
         millimetres). float32/float64; integers need ``depth_scale``. Invalid depth (0,
-        negative, NaN, inf) gives NaN and counts as a depth jump.
+        negative, NaN, inf) gives NaN and counts as a depth jump with each of its 4-neighbours.
     K : Intrinsics, array (3, 3) or (fx, fy, cx, cy)
         Intrinsics in pixels, 0-based pixel centres.
     mode : str, default "average-3d-gradient"
