@@ -194,7 +194,7 @@ def _integral_cols(c0, c1, I):
 
 # ------------------------------------------------------------------------------ box queries
 
-@nb.njit(cache=True, error_model=_NUMPY, inline="always")
+@nb.njit(cache=True, error_model=_NUMPY)
 def _fold(a, b, n, seg):
     """Split the inclusive range [a, b] of the mirrored extension of [0, n) (pixel -k is
     pixel k - 1, pixel n - 1 + k is pixel n - k) into at most 3 ranges inside [0, n),
@@ -221,16 +221,27 @@ def _fold(a, b, n, seg):
 def _box(I, r0, r1, c0, c1, rs, cs, acc):
     """acc[:] = sums of every channel of I over rows [r0, r1] x columns [c0, c1] of the
     mirrored image (inclusive ranges); returns (sum of the column indices, sum of the row
-    indices) of the folded pixels, each pixel counted once whatever its validity."""
+    indices) of the folded pixels, each pixel counted once whatever its validity.
+
+    Windows inside the image take one integral-image query here (inlined); the others go to
+    :func:`_box_folded`."""
     h = I.shape[0] - 1
     w = I.shape[1] - 1
-    nc = I.shape[2]
-    if r0 >= 0 and c0 >= 0 and r1 < h and c1 < w:  # inside the image: one query
-        for k in range(nc):
+    if r0 >= 0 and c0 >= 0 and r1 < h and c1 < w:
+        for k in range(I.shape[2]):
             acc[k] = I[r1 + 1, c1 + 1, k] - I[r0, c1 + 1, k] - I[r1 + 1, c0, k] + I[r0, c0, k]
         nq = c1 - c0 + 1
         nr = r1 - r0 + 1
         return 0.5 * (c0 + c1) * nq * nr, 0.5 * (r0 + r1) * nq * nr
+    return _box_folded(I, r0, r1, c0, c1, rs, cs, acc)
+
+
+@nb.njit(cache=True, error_model=_NUMPY)
+def _box_folded(I, r0, r1, c0, c1, rs, cs, acc):
+    """:func:`_box` for a window that leaves the image: up to 3 x 3 queries (:func:`_fold`)."""
+    h = I.shape[0] - 1
+    w = I.shape[1] - 1
+    nc = I.shape[2]
     for c in range(nc):
         acc[c] = 0.0
     nr = _fold(r0, r1, h, rs)
@@ -257,7 +268,7 @@ def _cross(ax, ay, az, bx, by, bz):
     return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
 
 
-@nb.njit(cache=True, error_model=_NUMPY)
+@nb.njit(cache=True, error_model=_NUMPY, inline="always")
 def _mode_normal(I, mode, v, u, r, fx, fy, cx, cy, rs, cs, a, b, cq, dq):
     """The (unnormalised) normal of ``mode`` at (v, u) with window half-size r; NaN when a
     sum it needs is empty. a, b, cq, dq: scratch vectors of the channel count."""
@@ -301,7 +312,7 @@ def _mode_normal(I, mode, v, u, r, fx, fy, cx, cy, rs, cs, a, b, cq, dq):
     return _cross(tx0, tx1, tx2, ty0, ty1, ty2)
 
 
-@nb.njit(cache=True, error_model=_NUMPY)
+@nb.njit(cache=True, error_model=_NUMPY, inline="always")
 def _adc_tangent(I, r0, r1, c0, c1, s0, s1, d0, d1, fx, fy, cx, cy, rs, cs, a, b):
     """Back-projected mean of box 2 minus that of box 1 (mean depth at mean pixel)."""
     su, sv = _box(I, r0, r1, c0, c1, rs, cs, a)
