@@ -269,31 +269,42 @@ def _cross(ax, ay, az, bx, by, bz):
 
 
 @nb.njit(cache=True, error_model=_NUMPY, inline="always")
-def _mode_normal(I, mode, v, u, r, fx, fy, cx, cy, rs, cs, a, b, cq, dq):
-    """The (unnormalised) normal of ``mode`` at (v, u) with window half-size r; NaN when a
-    sum it needs is empty. a, b, cq, dq: scratch vectors of the channel count."""
+def _boxes(mode, v, u, r):
+    """The (up to 4) boxes of ``mode`` at (v, u), half-size r: rows (r0, r1), columns (c0, c1)
+    per box, inclusive; unused boxes repeat the first."""
+    if mode == _AVG3D or mode == _COV:
+        whole = (v - r, v + r, u - r, u + r)
+        return (whole, whole, whole, whole)
+    if mode == _SIMPLE:  # right column, left column, bottom row, top row
+        return ((v - r, v + r, u + r, u + r), (v - r, v + r, u - r, u - r),
+                (v + r, v + r, u - r, u + r), (v - r, v - r, u - r, u + r))
+    # average depth change: left, right (r columns x 2q + 1 rows), above, below (2q + 1
+    # columns x r rows); PCL's rect_width_4_ = s // 4 is q = r // 2 for s = 2r and 2r + 1
+    q = r // 2
+    return ((v - q, v + q, u - r, u - 1), (v - q, v + q, u + 1, u + r),
+            (v - r, v - 1, u - q, u + q), (v + 1, v + r, u - q, u + q))
+
+
+@nb.njit(cache=True, error_model=_NUMPY, inline="always")
+def _solve(mode, a, b, cq, dq, pos, fx, fy, cx, cy):
+    """The (unnormalised) normal of ``mode`` from the channel sums of its boxes (a, b, cq, dq:
+    :func:`_boxes` order) and, for the average depth change, the mean pixel (u, v) of each box
+    in ``pos`` (8,); NaN when a sum it needs is empty."""
     nan = np.nan
     if mode == _AVG3D:
-        _box(I, v - r, v + r, u - r, u + r, rs, cs, a)
         if a[6] == 0.0 or a[7] == 0.0:
             return nan, nan, nan
-        # PCL: gradient_y x gradient_x
-        return _cross(a[3], a[4], a[5], a[0], a[1], a[2])
+        return _cross(a[3], a[4], a[5], a[0], a[1], a[2])  # PCL: gradient_y x gradient_x
     if mode == _COV:
-        _box(I, v - r, v + r, u - r, u + r, rs, cs, a)
         n = a[0]
         if n < 3.0:
             return nan, nan, nan
         return smallest_eigenvector(a[4] - a[1] * a[1] / n, a[5] - a[1] * a[2] / n,
                                     a[6] - a[1] * a[3] / n, a[7] - a[2] * a[2] / n,
                                     a[8] - a[2] * a[3] / n, a[9] - a[3] * a[3] / n)
-    if mode == _SIMPLE:
-        _box(I, v - r, v + r, u + r, u + r, rs, cs, a)   # right column
-        _box(I, v - r, v + r, u - r, u - r, rs, cs, b)   # left column
-        _box(I, v + r, v + r, u - r, u + r, rs, cs, cq)  # bottom row
-        _box(I, v - r, v - r, u - r, u + r, rs, cs, dq)  # top row
-        if a[0] == 0.0 or b[0] == 0.0 or cq[0] == 0.0 or dq[0] == 0.0:
-            return nan, nan, nan
+    if a[0] == 0.0 or b[0] == 0.0 or cq[0] == 0.0 or dq[0] == 0.0:
+        return nan, nan, nan
+    if mode == _SIMPLE:  # (bottom - top) x (right - left), mean points
         gx0 = a[1] / a[0] - b[1] / b[0]
         gx1 = a[2] / a[0] - b[2] / b[0]
         gx2 = a[3] / a[0] - b[3] / b[0]
@@ -301,40 +312,59 @@ def _mode_normal(I, mode, v, u, r, fx, fy, cx, cy, rs, cs, a, b, cq, dq):
         gy1 = cq[2] / cq[0] - dq[2] / dq[0]
         gy2 = cq[3] / cq[0] - dq[3] / dq[0]
         return _cross(gy0, gy1, gy2, gx0, gx1, gx2)
-    # average depth change: boxes of r columns x (2q + 1) rows beside the pixel, and of
-    # (2q + 1) columns x r rows above and below it; each gives its mean depth at the mean
-    # position of its pixels
-    q = r // 2  # PCL's rect_width_4_ = s // 4 for s = 2r and 2r + 1
-    tx0, tx1, tx2 = _adc_tangent(I, v - q, v + q, u - r, u - 1, v - q, v + q, u + 1, u + r,
-                                 fx, fy, cx, cy, rs, cs, a, b)
-    ty0, ty1, ty2 = _adc_tangent(I, v - r, v - 1, u - q, u + q, v + 1, v + r, u - q, u + q,
-                                 fx, fy, cx, cy, rs, cs, a, b)
-    return _cross(tx0, tx1, tx2, ty0, ty1, ty2)
+    # average depth change: each box back-projected at its mean pixel and mean depth
+    zl = a[1] / a[0]
+    zr = b[1] / b[0]
+    zu = cq[1] / cq[0]
+    zd = dq[1] / dq[0]
+    tx0 = ((pos[2] - cx) * zr - (pos[0] - cx) * zl) / fx
+    tx1 = ((pos[3] - cy) * zr - (pos[1] - cy) * zl) / fy
+    ty0 = ((pos[6] - cx) * zd - (pos[4] - cx) * zu) / fx
+    ty1 = ((pos[7] - cy) * zd - (pos[5] - cy) * zu) / fy
+    return _cross(tx0, tx1, zr - zl, ty0, ty1, zd - zu)
 
 
-@nb.njit(cache=True, error_model=_NUMPY, inline="always")
-def _adc_tangent(I, r0, r1, c0, c1, s0, s1, d0, d1, fx, fy, cx, cy, rs, cs, a, b):
-    """Back-projected mean of box 2 minus that of box 1 (mean depth at mean pixel)."""
-    su, sv = _box(I, r0, r1, c0, c1, rs, cs, a)
-    na = (r1 - r0 + 1) * (c1 - c0 + 1)
-    tu, tv = _box(I, s0, s1, d0, d1, rs, cs, b)
-    nb_ = (s1 - s0 + 1) * (d1 - d0 + 1)
-    if a[0] == 0.0 or b[0] == 0.0:
-        return np.nan, np.nan, np.nan
-    za = a[1] / a[0]
-    zb = b[1] / b[0]
-    xa = (su / na - cx) * za / fx
-    ya = (sv / na - cy) * za / fy
-    xb = (tu / nb_ - cx) * zb / fx
-    yb = (tv / nb_ - cy) * zb / fy
-    return xb - xa, yb - ya, zb - za
+@nb.njit(cache=True, error_model=_NUMPY)
+def _pixel_sums(I, mode, v, u, r, rs, cs, a, b, cq, dq, pos):
+    """The box sums of ``mode`` at one pixel, any window (mirrored where it leaves the image)."""
+    bx = _boxes(mode, v, u, r)
+    nbox = 1 if mode == _AVG3D or mode == _COV else 4
+    for i in range(nbox):
+        r0, r1, c0, c1 = bx[i]
+        acc = a if i == 0 else (b if i == 1 else (cq if i == 2 else dq))
+        su, sv = _box(I, r0, r1, c0, c1, rs, cs, acc)
+        npx = (r1 - r0 + 1) * (c1 - c0 + 1)
+        pos[2 * i] = su / npx
+        pos[2 * i + 1] = sv / npx
+
+
+@nb.njit(cache=True, error_model=_NUMPY)
+def _row_sums(I, mode, v, r, lo, hi, S):
+    """Box sums of ``mode`` with half-size r for the pixels (v, lo .. hi-1), every box inside
+    the image: ``S[i, k, u]`` for box i, channel k (vectorisable slices)."""
+    nc = I.shape[2]
+    bx = _boxes(mode, v, lo, r)
+    nbox = 1 if mode == _AVG3D or mode == _COV else 4
+    m = hi - lo
+    for i in range(nbox):
+        r0, r1, c0, c1 = bx[i]
+        for k in range(nc):
+            t = S[i, k, lo:hi]
+            p11 = I[r1 + 1, c1 + 1:c1 + 1 + m, k]
+            p01 = I[r0, c1 + 1:c1 + 1 + m, k]
+            p10 = I[r1 + 1, c0:c0 + m, k]
+            p00 = I[r0, c0:c0 + m, k]
+            for j in range(m):
+                t[j] = p11[j] - p01[j] - p10[j] + p00[j]
 
 
 @nb.njit(cache=True, nogil=True, error_model=_NUMPY)
 def _normals_rows(v0, v1, z, units, I, fx, fy, cx, cy, mode, size, depth_dependent, ignore, out):
     """Rows [v0, v1): window size from the distance map, border policy, normal of ``mode``.
 
-    ``size``: normal_smoothing_size; ``ignore``: BORDER_POLICY_IGNORE (else mirror)."""
+    ``size``: normal_smoothing_size; ``ignore``: BORDER_POLICY_IGNORE (else mirror). The
+    pixels whose window is the full ``int(size)`` and inside the image take their sums from
+    whole-row slices (:func:`_row_sums`); the others from :func:`_pixel_sums`."""
     h, w = z.shape
     nc = I.shape[2]
     rs = np.empty((3, 2), dtype=np.int64)
@@ -343,15 +373,47 @@ def _normals_rows(v0, v1, z, units, I, fx, fy, cx, cy, mode, size, depth_depende
     b = np.empty(nc)
     cq = np.empty(nc)
     dq = np.empty(nc)
+    pos = np.zeros(8)
+    ppos = np.zeros(8)
+    S = np.empty((4, nc, w))
     border = int(size)
     rmax = min(h, w)  # the mirror folds at most one image size
+    R = int(size) // 2
+    full = _STEP * int(size)  # distance (units) from which the window is the full int(size)
+    lo = R + 1
+    hi = w - R - 1
     for v in range(v0, v1):
+        fast = (not depth_dependent and R >= 1 and int(size) >= 3 and R <= rmax and v - R >= 1
+                and v + R + 1 < h and lo < hi)
+        if fast:
+            _row_sums(I, mode, v, R, lo, hi, S)
+            bx = _boxes(mode, v, 0, R)
+            for i in range(4):
+                r0, r1, c0, c1 = bx[i]
+                pos[2 * i] = 0.5 * (c0 + c1)  # + u
+                pos[2 * i + 1] = 0.5 * (r0 + r1)
         for u in range(w):
             out[v, u, 0] = np.nan
             out[v, u, 1] = np.nan
             out[v, u, 2] = np.nan
             zq = np.float64(z[v, u])
             if not (zq == zq):
+                continue
+            if fast and lo <= u < hi and units[v, u] >= full:
+                if ignore and (u < border or u >= w - border or v < border or v >= h - border):
+                    continue
+                for k in range(nc):
+                    a[k] = S[0, k, u]
+                if mode != _AVG3D and mode != _COV:
+                    for k in range(nc):
+                        b[k] = S[1, k, u]
+                        cq[k] = S[2, k, u]
+                        dq[k] = S[3, k, u]
+                    for i in range(4):
+                        ppos[2 * i] = pos[2 * i] + u
+                        ppos[2 * i + 1] = pos[2 * i + 1]
+                nx, ny, nz = _solve(mode, a, b, cq, dq, ppos, fx, fy, cx, cy)
+                store_normal(out, v, u, nx, ny, nz, (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
                 continue
             lim = size + zq / 10.0 if depth_dependent else size
             sm = min(units[v, u] / _STEP, lim)
@@ -361,7 +423,8 @@ def _normals_rows(v0, v1, z, units, I, fx, fy, cx, cy, mode, size, depth_depende
             if ignore and (v < border or v >= h - border or u < border or u >= w - border
                            or v <= r or v + r >= h or u <= r or u + r >= w):
                 continue
-            nx, ny, nz = _mode_normal(I, mode, v, u, r, fx, fy, cx, cy, rs, cs, a, b, cq, dq)
+            _pixel_sums(I, mode, v, u, r, rs, cs, a, b, cq, dq, ppos)
+            nx, ny, nz = _solve(mode, a, b, cq, dq, ppos, fx, fy, cx, cy)
             store_normal(out, v, u, nx, ny, nz, (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
 
 
