@@ -1,6 +1,8 @@
 """The estimators. Importing this package registers every one of them."""
 
+from .cross_product import cross_product
 from .d2nt import d2nt
+from .pcl import pcl_integral_image
 from .pointcloud import angle_weighted, area_weighted, plane_pca, plane_svd, vector_svd
 from .range_image import fals, line_mod, sri
 from .roadseg import sne_roadseg
@@ -10,9 +12,11 @@ from .threefn import three_filters_to_normal
 __all__ = [
     "angle_weighted",
     "area_weighted",
+    "cross_product",
     "d2nt",
     "fals",
     "line_mod",
+    "pcl_integral_image",
     "plane_pca",
     "plane_svd",
     "sda_sne",
