@@ -27,7 +27,10 @@ EXACT = {"3f2n": 1e-3, "d2nt": 1e-2}
 APPROX = {"sri": 0.03, "line-mod": 0.005}
 # options that adapt a method to these toy scenes (depth changes of ~0.3 per pixel): LINE-MOD's
 # depth-difference threshold is in the depth unit (0.05 m by default)
-TOY_OPTIONS = {"line-mod": {"threshold": 10.0}}
+TOY_OPTIONS = {"line-mod": {"threshold": 10.0}} | {
+    f"pcl-{mode}": {"max_depth_change_factor": 1.0}
+    for mode in ("average-3d-gradient", "covariance-matrix", "average-depth-change", "simple-3d-gradient")
+}
 
 
 def toy_estimate(depth, K, method):
