@@ -10,6 +10,7 @@ code runs asynchronously on a GPU and traces under ``torch.compile``.
 
 from __future__ import annotations
 
+import math
 import numbers
 from dataclasses import dataclass
 from typing import Any
@@ -75,7 +76,8 @@ def _as_depth(depth: Any, depth_scale: float | None) -> tuple[torch.Tensor, torc
             raise TypeError(f"depth has integer dtype {depth.dtype}; pass depth_scale (metres per unit, "
                             "e.g. depth_scale=0.001 for millimetres) so nothing is rescaled silently")
         out_dtype = torch.float32
-        z = depth.to(torch.float32)
+        # scaled in float64 and rounded once, as the numba library does
+        return (depth.to(torch.float64) * depth_scale).to(torch.float32), out_dtype
     if depth_scale is not None and depth_scale != 1.0:
         z = z * depth_scale
     return z, out_dtype
@@ -108,9 +110,15 @@ def camera(K: Any, batch: int, h: int, w: int, dtype: torch.dtype, device: torch
     if isinstance(K, torch.Tensor):
         fx, fy, cx, cy = _camera_from_tensor(K, batch, dtype, device)
     else:
-        cam = K if isinstance(K, Intrinsics) else as_intrinsics(K)
-        fx, fy, cx, cy = (torch.full((1, 1, 1), float(x), dtype=dtype, device=device)
-                          for x in (cam.fx, cam.fy, cam.cx, cam.cy))
+        if isinstance(K, (tuple, list)) and len(K) == 4 and all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) for x in K):
+            vals = K  # plain numbers: no numpy round trip (keeps torch.compile graphs whole)
+            if not all(math.isfinite(x) for x in vals) or not (vals[0] > 0 and vals[1] > 0):
+                raise ValueError(f"fx, fy must be finite and > 0, cx, cy finite; got {tuple(K)}")
+        else:
+            cam = K if isinstance(K, Intrinsics) else as_intrinsics(K)
+            vals = (cam.fx, cam.fy, cam.cx, cam.cy)
+        fx, fy, cx, cy = (torch.full((1, 1, 1), float(x), dtype=dtype, device=device) for x in vals)
     u = torch.arange(w, dtype=dtype, device=device).reshape(1, 1, w)
     v = torch.arange(h, dtype=dtype, device=device).reshape(1, h, 1)
     return Camera(fx, fy, cx, cy, u - cx, v - cy)
