@@ -29,7 +29,8 @@ def test_import_depthnormals_does_not_import_torch():
 
 def test_methods_and_defaults_follow_the_numba_library():
     assert dt.METHODS == ("3f2n", "d2nt", "sne-roadseg", "3f2n+", "d2nt+", "sne-roadseg+")
-    for base, func in (("3f2n", dn.three_filters_to_normal), ("d2nt", dn.d2nt), ("sne-roadseg", dn.sne_roadseg)):
+    for base, func in (("3f2n", dn.three_filters_to_normal), ("d2nt", dn.d2nt),
+                       ("sne-roadseg", dn.sne_roadseg)):
         sig = {p.name: p.default for p in inspect.signature(func).parameters.values()
                if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name != "depth_scale"}
         assert dt.method_defaults(base) == sig

@@ -21,7 +21,8 @@ DEFAULT_METHODS = ("3f2n", "d2nt", "sne-roadseg", "3f2n+", "d2nt+")
 
 
 def _batch_numba(depths, Ks, method, **options):
-    return np.stack([dn.estimate_normals(z, K, method=method, **options) for z, K in zip(depths, Ks)])
+    return np.stack([dn.estimate_normals(z, K, method=method, **options)
+                     for z, K in zip(depths, Ks, strict=True)])
 
 
 def _batch_torch(depths, Ks, method, **options):
@@ -116,7 +117,8 @@ MODULE_OPTIONS = [
     {"correlation": "kendall"}, {"correlation": "kendall-prose"},
     {"correlation": "kendall", "neighbourhood": "square"},
     {"correlation": "kendall", "crf": True}, {"crf": True}, {"correlation": "kendall-prose", "crf": True},
-    {"correlation": "pearson", "crf": True}, {"correlation": "kendall", "crf": True, "neighbourhood": "square"},
+    {"correlation": "pearson", "crf": True},
+    {"correlation": "kendall", "crf": True, "neighbourhood": "square"},
     {"correlation": "kendall", "crf": True, "iterations": 3}, {"crf": True, "lambda_": 0.5, "sigma": 0.5},
     {"aggregate": "mean"}, {"kernel": "sobel"},
 ]
@@ -147,7 +149,7 @@ def test_parity_padded_batch(torusknot):
     Ks = torch.tensor([[K.fx, K.fy, K.cx - ou, K.cy - ov] for ov, ou in offs])
     with torch.no_grad():
         n = dt.estimate_normals(torch.from_numpy(padded), Ks, method="3f2n+").permute(0, 2, 3, 1).numpy()
-    for i, (c, (ov, ou)) in enumerate(zip(crops, offs)):
+    for i, (c, (ov, ou)) in enumerate(zip(crops, offs, strict=False)):
         ref = dn.estimate_normals(c, (K.fx, K.fy, K.cx - ou, K.cy - ov), method="3f2n+")
         got = n[i, :c.shape[0], :c.shape[1]]
         # the padding is invalid depth: the last row / column sees a hole instead of the

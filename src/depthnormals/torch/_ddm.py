@@ -273,7 +273,7 @@ def crf_step(grid: Grid, cam: Camera, cur, cur_ok, anchor, anchor_ok, kq, sims, 
         ad = torch.stack([c.detach() for c in anchor], dim=1)
         k = torch.where(kq < _BIG, kq, torch.full_like(kq, _BIG)) * lam
         nbr, wts = [], []
-        for (dv, du), s in zip(_N8, sims):
+        for (dv, du), s in zip(_N8, sims):  # noqa: B905
             okn = shift(cur_ok, dv, du, False)
             nbr.append(torch.stack([shift(cd[:, j], dv, du, 0.0) for j in range(3)], dim=1))
             wts.append(torch.where(okn, s, torch.zeros_like(s)))

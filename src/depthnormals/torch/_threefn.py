@@ -210,7 +210,7 @@ def _median_fast(terms: list[torch.Tensor], keep: list[torch.Tensor]) -> torch.T
     inf = float("inf")
     parity = torch.zeros_like(keep[0])
     a = []
-    for t, k in zip(terms, keep):
+    for t, k in zip(terms, keep):  # noqa: B905
         fill = torch.where(parity, -inf, inf)
         a.append(torch.where(k, t, fill))
         parity = parity ^ ~k
@@ -262,9 +262,9 @@ def aggregate(terms: list[torch.Tensor], keep: list[torch.Tensor], mode: str) ->
         return _median_fast(terms, keep)
     n = torch.stack(keep).sum(0).to(terms[0].dtype)
     if mode == "mean":
-        s = sum(torch.where(k, t, 0.0) for t, k in zip(terms, keep))
+        s = sum(torch.where(k, t, 0.0) for t, k in zip(terms, keep))  # noqa: B905
         return s / torch.clamp(n, min=1.0)
-    srt = sort8([torch.where(k, t, float("inf")) for t, k in zip(terms, keep)])
+    srt = sort8([torch.where(k, t, float("inf")) for t, k in zip(terms, keep)])  # noqa: B905
     if mode == "trimean":
         stack = torch.stack(srt, dim=1)
         return 0.25 * (_quantile(stack, n, 0.25) + 2.0 * _quantile(stack, n, 0.5)
@@ -307,7 +307,7 @@ def sne_roadseg(grid: Grid, cam: Camera
     terms, keep = candidate_terms(grid, gu, gv)
     sw = torch.zeros_like(gu)
     sz = torch.zeros_like(gu)
-    for t, k in zip(terms, keep):
+    for t, k in zip(terms, keep):  # noqa: B905
         nzi = c - t
         k = k & (n2 > 0)  # a zero gradient gives (0, 0, -1) below: keep rsqrt's operand > 0
         w = torch.rsqrt(torch.where(k, n2 + nzi * nzi, 1.0))
