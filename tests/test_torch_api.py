@@ -180,3 +180,18 @@ def test_tiny_images(method):
         n = dt.estimate_normals(z, (100.0, 100.0, 0.0, 0.0), method=method)
         ref = dn.estimate_normals(z[0].numpy(), (100.0, 100.0, 0.0, 0.0), method=method)
         np.testing.assert_allclose(n[0].permute(1, 2, 0).numpy(), ref, atol=1e-6)
+
+
+def test_docs_examples_run():
+    """The code blocks of docs/torch.md run as written."""
+    import pathlib
+    import re
+
+    text = (pathlib.Path(__file__).resolve().parents[1] / "docs" / "torch.md").read_text()
+    ns: dict = {}
+    for block in re.findall(r"```python\n(.*?)```", text, re.S):
+        exec(block, ns)
+    assert ns["batch"].shape == (4, 4, 48, 64)
+    assert ns["n"].shape == (2, 3, 480, 640) and ns["mask"].shape == (2, 1, 480, 640)
+    net = ns["WithNormals"](torch.nn.Conv2d(4, 2, 3, padding=1), (60.0, 60.0, 31.5, 23.5))
+    assert net(torch.rand(2, 1, 48, 64) + 1).shape == (2, 2, 48, 64)
