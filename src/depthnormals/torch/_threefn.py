@@ -67,15 +67,18 @@ def gradient_kernels(kernel: str, size: int) -> tuple[list[float], list[float]]:
 
 
 class _Inverse:
-    """Padded inverse depth: ``at(dv, du)`` (safe 1 where invalid) beside ``Grid.ok``."""
+    """Inverse depth relative to the pixel's own: ``at(dv, du) = 1/z(dv, du) - 1/z_q``,
+    computed as ``(z_q - z) / (z z_q)`` (no cancellation of two large inverse depths; the
+    stencils only take differences, so the offset ``1/z_q`` cancels exactly). Invalid pixels
+    read the safe depth 1; ``Grid.ok`` says which are valid."""
 
     def __init__(self, grid: Grid):
         self.g = grid
-        self._d = 1.0 / grid._zp
 
     def at(self, dv: int, du: int) -> torch.Tensor:
-        p = self.g.p
-        return self._d[:, p + dv:p + dv + self.g.h, p + du:p + du + self.g.w]
+        zq = self.g.zs
+        z = self.g.z(dv, du)
+        return (zq - z) / (z * zq)
 
 
 def _fd3(grid: Grid, av: int, au: int) -> tuple[torch.Tensor, torch.Tensor]:
