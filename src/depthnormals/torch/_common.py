@@ -20,9 +20,7 @@ import torch.nn.functional as F
 
 from ..camera import Intrinsics, as_intrinsics
 
-__all__ = ["Camera", "Grid", "finish", "oriented", "prepare"]
-
-_HALF = (torch.float16, torch.bfloat16)
+__all__ = ["Camera", "Grid", "camera", "finish", "oriented", "prepare", "shift"]
 
 
 @dataclass(frozen=True)
@@ -159,7 +157,8 @@ class Grid:
 
 
 def shift(x: torch.Tensor, dv: int, du: int, fill: float | bool) -> torch.Tensor:
-    """``x`` (B, H, W) read at offset (dv, du) (|dv|, |du| <= 1 .. any), ``fill`` outside."""
+    """``x`` (B, H, W) read at offset (dv, du): ``out[v, u] = x[v + dv, u + du]``, ``fill``
+    outside the image (a padded copy, then a view)."""
     h, w = x.shape[-2:]
     p = max(abs(dv), abs(du))
     if p == 0:
@@ -191,7 +190,3 @@ def finish(nx: torch.Tensor, ny: torch.Tensor, nz: torch.Tensor, ok: torch.Tenso
     n = torch.where(ok[:, None], n, float("nan") if invalid == "nan" else 0.0)
     return n.to(dtype)
 
-
-def half_dtypes() -> tuple[torch.dtype, ...]:
-    """The dtypes computed in float32 and returned in their own dtype."""
-    return _HALF

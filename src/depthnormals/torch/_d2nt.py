@@ -8,7 +8,7 @@ import math
 
 import torch
 
-from ._common import Camera, Grid, oriented
+from ._common import Camera, Grid, oriented, shift
 
 __all__ = ["VARIANTS", "d2nt"]
 
@@ -87,8 +87,6 @@ def _copy_refinement(grid: Grid, cam: Camera, nx: torch.Tensor, ny: torch.Tensor
     """Each valid pixel takes the normal of whichever of {left, right, up, down, self} (with a
     normal) has the least |Laplacian| (strictly less: the first wins ties, inf never wins);
     its own normal when none does."""
-    from ._common import shift
-
     lap = _laplacian_4(grid).detach()
     inf = torch.full_like(lap, float("inf"))
     best = inf
