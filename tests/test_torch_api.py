@@ -36,6 +36,13 @@ def test_methods_and_defaults_follow_the_numba_library():
         assert dt.method_defaults(base) == sig
         sig.update(dn.ddm.module_defaults())
         assert dt.method_defaults(base + "+") == sig
+    # the module's choices are the numba module's (its public constants)
+    from depthnormals.torch._api import _CHOICES
+
+    assert set(_CHOICES["curvature"]) == {*dn.ddm.CURVATURES, "none"}
+    assert set(_CHOICES["correlation"]) == set(dn.ddm.CORRELATIONS)
+    assert set(_CHOICES["neighbourhood"]) == set(dn.ddm.NEIGHBOURHOODS)
+    assert set(_CHOICES["derivatives"]) == set(dn.ddm.DERIVATIVES)
     # today's numba defaults, pinned (if they change, the torch path follows: see above)
     d = dt.method_defaults("3f2n+")
     assert (d["curvature"], d["self_weight"], d["consistency"], d["crf"], d["correlation"]) == \
