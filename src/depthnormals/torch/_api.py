@@ -1,0 +1,295 @@
+"""The public torch API: :func:`estimate_normals`, :func:`normals_mask` and the module twin."""
+
+from __future__ import annotations
+
+import inspect
+import numbers
+from typing import Any
+
+import torch
+from torch import nn
+
+from ._common import Grid, finish, prepare
+from ._d2nt import VARIANTS, d2nt
+from ._ddm import refine
+from ._threefn import AGGREGATES, KERNELS, sne_roadseg, three_filters_to_normal
+
+__all__ = ["METHODS", "EstimateNormals", "estimate_normals", "method_defaults", "normals_mask"]
+
+_BASES = ("3f2n", "d2nt", "sne-roadseg")
+#: names accepted by :func:`estimate_normals` (``"<name>+"``: the estimator, then the DDM)
+METHODS = (*_BASES, *(b + "+" for b in _BASES))
+_CURVATURES = ("mean", "max", "normal", "gauss", "pixel-mean", "none")
+_CHOICES = {
+    "kernel": tuple(KERNELS), "aggregate": AGGREGATES, "variant": VARIANTS,
+    "curvature": _CURVATURES, "correlation": ("kendall", "kendall-prose", "pearson", "none"),
+    "derivatives": ("inverse-depth", "depth"), "slope": ("min", "central"),
+    "footprint": ("pixel", "neighbours"), "neighbourhood": ("square", "cross"),
+    "selection": ("curvature", "plane-fit"),
+}
+_MODULE_OPTIONS = ("curvature", "correlation", "crf", "sigma", "lambda_", "iterations",
+                   "neighbourhood", "derivatives", "slope", "footprint", "selection", "fit_radius",
+                   "self_weight", "consistency")
+
+
+def _numba_function(base: str):
+    import depthnormals as dn
+
+    return {"3f2n": dn.three_filters_to_normal, "d2nt": dn.d2nt, "sne-roadseg": dn.sne_roadseg}[base]
+
+
+def _read_defaults() -> dict[str, dict[str, Any]]:
+    """The numba estimators' and module's options with their defaults, read from their
+    signatures once, at import (not inside a traced call)."""
+    from depthnormals.ddm import module_defaults
+
+    out = {}
+    for base in _BASES:
+        params = inspect.signature(_numba_function(base)).parameters.values()
+        out[base] = {p.name: p.default for p in params
+                     if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name != "depth_scale"}
+    out["+"] = dict(module_defaults())
+    return out
+
+
+_DEFAULTS = _read_defaults()
+
+
+def method_defaults(method: str) -> dict[str, Any]:
+    """The options of ``method`` and their defaults: those of the numba library, read from
+    its signatures (so the torch path follows when they change).
+
+    Examples
+    --------
+    >>> from depthnormals.torch import method_defaults
+    >>> method_defaults("3f2n")
+    {'kernel': 'fd', 'kernel_size': 3, 'aggregate': 'median'}
+    """
+    base = _check_method(method)
+    opts = dict(_DEFAULTS[base])
+    if method.endswith("+"):
+        opts.update(_DEFAULTS["+"])
+    return opts
+
+
+def _check_method(method: Any) -> str:
+    if not isinstance(method, str):
+        raise TypeError(f"method must be a string, one of {', '.join(METHODS)}; got {method!r}")
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r} for depthnormals.torch; valid methods: "
+                         f"{', '.join(METHODS)} (the numba library has more: depthnormals.methods())")
+    return method.rstrip("+")
+
+
+def _real(value: Any, name: str, minimum: float) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name} must be a real number >= {minimum}; got {type(value).__name__}")
+    value = float(value)
+    if not (value >= minimum and value < float("inf")):
+        raise ValueError(f"{name} must be finite and >= {minimum}; got {value!r}")
+    return value
+
+
+def _integer(value: Any, name: str, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"{name} must be an integer in {lo}..{hi}; got {value!r}")
+    if not lo <= int(value) <= hi:
+        raise ValueError(f"{name} must be in {lo}..{hi}; got {value}")
+    return int(value)
+
+
+def _check_options(method: str, options: dict[str, Any]) -> dict[str, Any]:
+    """Options of ``method`` merged over its defaults, validated and normalised."""
+    defaults = method_defaults(method)
+    unknown = sorted(set(options) - set(defaults))
+    if unknown:
+        raise TypeError(f"method {method!r} got unknown option(s) {unknown}; valid options: "
+                        f"{', '.join(sorted(defaults)) or '(none)'}, depth_scale, invalid")
+    lag = sorted(set(defaults) - set(_CHOICES) - set(_MODULE_OPTIONS) - {"kernel_size"})
+    if lag:
+        raise ValueError(f"the numba library has option(s) {lag} that depthnormals.torch does not "
+                         "implement yet; use depthnormals.estimate_normals")
+    o = {**defaults, **options}
+    for name, choices in _CHOICES.items():
+        if name not in o:
+            continue
+        if name == "neighbourhood" and o[name] is None:
+            o[name] = "cross"
+        value = o[name]
+        if not isinstance(value, str):
+            raise TypeError(f"{name} must be a string, one of {', '.join(choices)}; got {value!r}")
+        if value not in choices:
+            raise ValueError(f"unknown {name} {value!r}; valid choices: {', '.join(choices)}")
+    if "kernel_size" in o:
+        ks = o["kernel_size"]
+        if isinstance(ks, bool) or not isinstance(ks, numbers.Integral):
+            raise TypeError(f"kernel_size must be an odd integer in 3..11; got {ks!r}")
+        if int(ks) not in (3, 5, 7, 9, 11):
+            raise ValueError(f"kernel_size must be one of 3, 5, 7, 9, 11; got {ks}")
+        o["kernel_size"] = int(ks)
+    if method.endswith("+"):
+        _check_module(o)
+    return o
+
+
+def _check_module(o: dict[str, Any]) -> None:
+    if not isinstance(o["crf"], bool):
+        raise TypeError(f"crf must be True or False; got {o['crf']!r}")
+    o["sigma"] = _real(o["sigma"], "sigma", 0.0)
+    o["lam"] = _real(o.pop("lambda_"), "lambda_", 0.0)
+    o["iterations"] = _integer(o["iterations"], "iterations", 1, 10**6)
+    o["fit_radius"] = _integer(o["fit_radius"], "fit_radius", 1, 3)
+    sw = _real(o["self_weight"], "self_weight", 0.0)
+    if not 0.0 < sw <= 1.0:
+        raise ValueError(f"self_weight must be in (0, 1]; got {o['self_weight']!r}")
+    o["self_weight"] = sw
+    if o["consistency"] is not None:
+        o["consistency"] = _real(o["consistency"], "consistency", 0.0)
+    if o["crf"] and o["curvature"] == "none":
+        raise ValueError("the CRF weights its edges by the depth curvature k_q: pass a curvature "
+                         "other than 'none', or crf=False for a correlation-only selection")
+    if o["selection"] != "curvature":
+        raise ValueError(f"selection={o['selection']!r} is not implemented in depthnormals.torch "
+                         "(only 'curvature'); use depthnormals.estimate_normals for the plane-fit "
+                         "selection")
+
+
+def _pad(base: str, o: dict[str, Any], refined: bool) -> int:
+    pad = 1
+    if base == "3f2n" and o["kernel"] != "roberts":
+        pad = o["kernel_size"] // 2
+    if (base == "d2nt" and o["variant"] != "basic") or refined:
+        pad = max(pad, 2)
+    return pad
+
+
+def estimate_normals(depth: torch.Tensor, K: Any, *, method: str = "3f2n+",
+                     depth_scale: float | None = None, invalid: str = "nan",
+                     **options: Any) -> torch.Tensor:
+    """Surface normals of a batch of depth images, in torch: batched, differentiable, on the
+    device of the input.
+
+    Parameters
+    ----------
+    depth : Tensor, shape (B, 1, H, W) or (B, H, W)
+        Planar depth z (any length unit). float32/float64 are computed in their own dtype,
+        float16/bfloat16 in float32; integer depth needs ``depth_scale``. Invalid depth
+        (0, negative, NaN, inf) never enters a stencil and gives no normal.
+    K : Tensor (3, 3), (B, 3, 3), (4,) or (B, 4); Intrinsics; 3x3 array; (fx, fy, cx, cy)
+        Intrinsics in pixels, 0-based pixel centres; one for the batch or one per frame.
+        Tensor values are not checked (checking would synchronise with the device).
+    method : {"3f2n", "d2nt", "sne-roadseg", "3f2n+", "d2nt+", "sne-roadseg+"}, default "3f2n+"
+        The estimator; ``"<name>+"`` adds the discontinuity discrimination module of 3F2N+.
+    depth_scale : float, optional
+        Metres per unit of integer depth (e.g. 0.001 for millimetres).
+    invalid : {"nan", "zero"}, default "nan"
+        What pixels without an estimate hold: NaN (the library's convention) or the zero
+        vector (safe to feed a network). :func:`normals_mask` recovers the mask from either.
+    **options
+        The options of the numba estimator of the same name, with the same defaults
+        (:func:`method_defaults`): ``kernel``, ``kernel_size``, ``aggregate`` (3F2N),
+        ``variant`` (D2NT) and, for ``"<name>+"``, those of
+        :func:`depthnormals.discontinuity_discrimination` except ``selection="plane-fit"``.
+
+    Returns
+    -------
+    normals : Tensor, shape (B, 3, H, W)
+        Unit normals in the OpenCV camera frame (x right, y down, z forward), facing the
+        camera (``dot(n, X) < 0``: a fronto-parallel wall gives (0, 0, -1)); NaN (or 0) where
+        no estimate exists. dtype: that of a floating input (float16/bfloat16 computed in
+        float32 and rounded), float32 for integer depth.
+
+    Notes
+    -----
+    Same results as :func:`depthnormals.estimate_normals` up to float32 rounding (parity
+    tests: <= 0.01 deg mean, <= 0.1 deg at the 99.9th percentile). Differentiable with
+    respect to depth (and tensor intrinsics); the selections (median, DAG switch, curvature
+    selection, CRF) are piecewise, so the gradient flows through the chosen candidate, and it
+    is finite wherever the output is. No host synchronisation: the call can be captured by
+    ``torch.compile`` and runs asynchronously on a GPU.
+
+    Examples
+    --------
+    >>> import torch
+    >>> from depthnormals.torch import estimate_normals
+    >>> depth = torch.full((1, 1, 4, 5), 2.0)
+    >>> estimate_normals(depth, (500.0, 500.0, 2.0, 1.5), method="3f2n")[0, :, 1, 2].tolist()
+    [0.0, 0.0, -1.0]
+    """
+    base = _check_method(method)
+    if not isinstance(invalid, str) or invalid not in ("nan", "zero"):
+        raise ValueError(f"invalid must be 'nan' or 'zero'; got {invalid!r}")
+    o = _check_options(method, options)
+    z, valid, cam, out_dtype = prepare(depth, K, depth_scale)
+    grid = Grid(z, valid, _pad(base, o, method.endswith("+")))
+    if base == "3f2n":
+        n = three_filters_to_normal(grid, cam, o["kernel"], o["kernel_size"], o["aggregate"])
+    elif base == "d2nt":
+        n = d2nt(grid, cam, o["variant"])
+    else:
+        n = sne_roadseg(grid, cam)
+    if method.endswith("+"):
+        n = refine(grid, cam, n[:3], n[3], o)
+    return finish(*n, invalid, out_dtype)
+
+
+def normals_mask(normals: torch.Tensor) -> torch.Tensor:
+    """Where a normal map from :func:`estimate_normals` holds an estimate: (B, 1, H, W) bool.
+
+    Works for either ``invalid`` convention (finite and of non-zero length).
+    """
+    if not isinstance(normals, torch.Tensor) or normals.ndim != 4 or normals.shape[1] != 3:
+        raise ValueError("normals must be a (B, 3, H, W) tensor from estimate_normals; got "
+                         f"{getattr(normals, 'shape', type(normals).__name__)}")
+    finite = torch.isfinite(normals).all(dim=1, keepdim=True)
+    return finite & (normals.abs().sum(dim=1, keepdim=True) > 0)
+
+
+class EstimateNormals(nn.Module):
+    """:func:`estimate_normals` as an ``nn.Module`` (for a model or a data transform).
+
+    Parameters
+    ----------
+    method : str, default "3f2n+"
+        As :func:`estimate_normals`.
+    K : optional
+        Intrinsics to use when ``forward`` gets none; a tensor is kept as a buffer (it follows
+        ``.to(device)``).
+    depth_scale, invalid, **options
+        As :func:`estimate_normals`; checked here, at construction.
+
+    Examples
+    --------
+    >>> import torch
+    >>> from depthnormals.torch import EstimateNormals
+    >>> net = EstimateNormals("3f2n", K=torch.tensor([500.0, 500.0, 2.0, 1.5]), invalid="zero")
+    >>> net(torch.full((2, 1, 4, 5), 2.0)).shape
+    torch.Size([2, 3, 4, 5])
+    """
+
+    def __init__(self, method: str = "3f2n+", K: Any = None, *, depth_scale: float | None = None,
+                 invalid: str = "nan", **options: Any):
+        super().__init__()
+        _check_options(method, options)
+        if not isinstance(invalid, str) or invalid not in ("nan", "zero"):
+            raise ValueError(f"invalid must be 'nan' or 'zero'; got {invalid!r}")
+        self.method = method
+        self.depth_scale = depth_scale
+        self.invalid = invalid
+        self.options = dict(options)
+        if isinstance(K, torch.Tensor):
+            self.register_buffer("K", K.clone())
+        else:
+            self.K = K
+
+    def forward(self, depth: torch.Tensor, K: Any = None) -> torch.Tensor:
+        """Normals (B, 3, H, W) of ``depth`` (B, 1, H, W) or (B, H, W)."""
+        K = self.K if K is None else K
+        if K is None:
+            raise ValueError("no intrinsics: pass K to forward or to the constructor")
+        return estimate_normals(depth, K, method=self.method, depth_scale=self.depth_scale,
+                                invalid=self.invalid, **self.options)
+
+    def extra_repr(self) -> str:
+        opts = "".join(f", {k}={v!r}" for k, v in self.options.items())
+        return f"method={self.method!r}, invalid={self.invalid!r}{opts}"
