@@ -73,12 +73,13 @@ def main() -> None:
           f"{args.rounds} interleaved rounds; {machine_description()}")
     for name, ts in times.items():
         med = statistics.median(ts)
-        cores = statistics.median(c / t for c, t in zip(cpu[name], ts))
+        cores = statistics.median(c / t for c, t in zip(cpu[name], ts, strict=True))
         print(f"  {name:<24} median {med:7.3f} s  ({args.frames / med:6.1f} frames/s)  "
               f"CPU/wall {cores:.2f}  runs {' '.join(f'{t:.3f}' for t in ts)}")
-    per_round = [a / b for a, b in zip(times["1 thread"], times["2 threads"])]
+    per_round = [a / b for a, b in zip(times["1 thread"], times["2 threads"], strict=True)]
     ratio = statistics.median(times["1 thread"]) / statistics.median(times["2 threads"])
-    print(f"speed-up 2 threads / 1 thread: {ratio:.2f}x (per round {' '.join(f'{r:.2f}' for r in per_round)})")
+    rounds = " ".join(f"{r:.2f}" for r in per_round)
+    print(f"speed-up 2 threads / 1 thread: {ratio:.2f}x (per round {rounds})")
 
 
 if __name__ == "__main__":

@@ -43,7 +43,7 @@ def test_batch_equals_single_calls(stack, method, dtype, two_threads):
     z = stack.astype(dtype)
     single = [dn.estimate_normals(f, ROUGH_K, method=method) for f in z]
     batch = dn.estimate_normals(z, ROUGH_K, method=method)
-    assert batch.shape == z.shape + (3,) and batch.dtype == np.float32
+    assert batch.shape == (*z.shape, 3) and batch.dtype == np.float32
     for i, ref in enumerate(single):
         assert _same_bits(batch[i], ref), f"frame {i} differs"
     # the holes are holes and the rest is a real estimate
@@ -55,7 +55,7 @@ def test_per_frame_intrinsics_and_options(stack, two_threads):
     Ks = [dn.Intrinsics(131.25 * s, 131.25 * s, 79.5, 59.5) for s in (1.0, 0.9, 1.1, 1.2)]
     as_mats = np.stack([k.matrix for k in Ks])
     opts = {"kernel": "sobel"}
-    single = [dn.estimate_normals(f, k, method="3f2n+", **opts) for f, k in zip(stack, Ks)]
+    single = [dn.estimate_normals(f, k, method="3f2n+", **opts) for f, k in zip(stack, Ks, strict=True)]
     for K in (Ks, as_mats):
         batch = dn.estimate_normals(stack, K, method="3f2n+", **opts)
         assert all(_same_bits(batch[i], single[i]) for i in range(4))

@@ -39,7 +39,7 @@ def tree(tmp_path):
         p.parent.mkdir(parents=True, exist_ok=True)
         np.save(p, _frame(k))
         files[rel] = _frame(k)
-    (tmp_path / "k.json").write_text(json.dumps(dict(zip(("fx", "fy", "cx", "cy"), K))))
+    (tmp_path / "k.json").write_text(json.dumps(dict(zip(("fx", "fy", "cx", "cy"), K, strict=True))))
     return tmp_path, files
 
 
@@ -90,7 +90,7 @@ def test_resume_skips_complete_outputs(tree, capsys):
     assert "(1 computed, 2 done before)" in capsys.readouterr().out
     assert np.load(out / "a" / "1.npy").tobytes() == _expect(files["a/1.npy"]).tobytes()
     assert np.load(marker).shape == (2, 2, 3)
-    assert main(argv + ["--no-resume"]) == 0
+    assert main([*argv, "--no-resume"]) == 0
     assert "(3 computed, 0 done before)" in capsys.readouterr().out
     assert np.load(marker).tobytes() == _expect(files["b/0.npy"]).tobytes()
 
@@ -155,7 +155,7 @@ def test_killed_run_resumes_to_the_same_files(tmp_path):
     n = 120
     for i in range(n):
         np.save(frames / f"{i:03d}.npy", _frame(i % 7, shape=(120, 160)))
-    (tmp_path / "k.json").write_text(json.dumps(dict(zip(("fx", "fy", "cx", "cy"), K))))
+    (tmp_path / "k.json").write_text(json.dumps(dict(zip(("fx", "fy", "cx", "cy"), K, strict=True))))
     out = tmp_path / "out"
     argv = [sys.executable, "-m", "depthnormals", "estimate", str(frames), "-K", str(tmp_path / "k.json"),
             "-o", str(out), "-m", "sda-sne", "-q"]

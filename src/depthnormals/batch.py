@@ -102,7 +102,7 @@ def map_threads(func: Callable[[T], R], items: Sequence[T], *, threads: int | No
                 while (i := next_index()) is not None:
                     results[i] = func(items[i])
                     events.put(("done", i))
-        except BaseException as exc:  # noqa: BLE001 - handed to the calling thread
+        except BaseException as exc:
             failed.set()
             events.put(("error", exc))
         finally:

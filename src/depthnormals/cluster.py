@@ -96,7 +96,7 @@ def connect(scheduler: str | SchedulerSpec) -> Iterator[Any]:
     """A ``distributed.Client`` for ``scheduler``, closed (with its local cluster) on exit.
 
     A local cluster has ``N`` worker processes (default: one per core) with one thread each,
-    no dashboard, and ``DEPTHNORMALS_NUM_THREADS`` set so that the workers together use the
+    the dashboard on a free port, and ``DEPTHNORMALS_NUM_THREADS`` set so that the workers together use the
     cores once: ``max(1, cores // N)`` row-band threads each. Workers of a remote scheduler
     keep their own settings (set ``DEPTHNORMALS_NUM_THREADS`` where they are started).
     """
@@ -108,8 +108,10 @@ def connect(scheduler: str | SchedulerSpec) -> Iterator[Any]:
     if spec.local:
         n = spec.workers or _cores()
         env = {"DEPTHNORMALS_NUM_THREADS": str(max(1, _cores() // n))}
+        # ":0": the scheduler's HTTP server (dashboard, health) on a free port; with None it
+        # still tries 8787 and warns when another cluster has it
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                               dashboard_address=None, env=env)
+                               dashboard_address=":0", env=env)
         try:
             with Client(cluster) as client:
                 yield client
@@ -203,7 +205,7 @@ def map_batches(func: Callable[[T], R], items: Iterable[T], *, client: Any = Non
     try:
         for fut in pending:
             batch = owner.pop(fut.key)
-            for item, result in zip(batch, fut.result()):
+            for item, result in zip(batch, fut.result(), strict=True):
                 done(item, result)
             fut.release()
             submit(1)
