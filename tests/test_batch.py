@@ -128,3 +128,27 @@ def test_map_threads_order_progress_and_errors(two_threads):
 
     with pytest.raises(ValueError, match="frame 3 is bad"):
         map_threads(boom, list(range(8)))
+
+
+def test_nested_batch_stays_serial(two_threads, monkeypatch):
+    """A batch inside a worker of another batch runs its frames on that worker, in order."""
+    import depthnormals.batch as batch
+
+    pools, limits = [], []
+    real_pool = batch._pool
+
+    def spy_pool(n):
+        pools.append(n)
+        return real_pool(n)
+
+    monkeypatch.setattr(batch, "_pool", spy_pool)
+
+    def inner(i):
+        limits.append(_parallel.threads_here())
+        return dn.estimate_normals(np.full((2, 40, 50), 2.0 + i), ROUGH_K, method="3f2n")
+
+    outs = map_threads(inner, [0, 1, 2])
+    assert pools == [2, 2]  # the outer batch's two workers only; the inner batches ran inline
+    assert limits == [1, 1, 1] and _parallel.threads_here() == 2
+    assert all(o.shape == (2, 40, 50, 3) for o in outs)
+    np.testing.assert_allclose(outs[1][1, 20, 25], [0.0, 0.0, -1.0], atol=1e-6)

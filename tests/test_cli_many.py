@@ -130,6 +130,8 @@ def test_bad_inputs(tree, capsys):
     assert "no depth file" in capsys.readouterr().err
     assert main(["estimate", str(root / "in"), *k, "-o", str(root / "o"), "-m", "nope", "-q"]) == 1
     assert "unknown method 'nope'" in capsys.readouterr().err
+    assert main(["estimate", str(root / "in"), *k, "-o", str(root / "n.npy"), "-q"]) == 1
+    assert "-o is a folder" in capsys.readouterr().err and not (root / "n.npy").exists()
     with pytest.raises(ValueError, match="format"):
         next(jobs.plan_estimate([root / "in"], root / "o", K=K, fmt="jpg"))
 

@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
-__all__ = ["get_num_threads", "run_rows", "set_num_threads", "thread_limit"]
+__all__ = ["get_num_threads", "run_rows", "set_num_threads", "thread_limit", "threads_here"]
 
 _lock = threading.Lock()
 _state: dict[str, Any] = {"threads": None, "pool": None, "pool_size": 0}
@@ -84,10 +84,15 @@ def thread_limit(n: int) -> Iterator[None]:
         _local.limit = old
 
 
+def threads_here() -> int:
+    """:func:`get_num_threads`, capped by the :func:`thread_limit` of the calling thread."""
+    limit = getattr(_local, "limit", None)
+    return get_num_threads() if limit is None else min(limit, get_num_threads())
+
+
 def run_rows(kernel: Callable[..., None], h: int, *args: Any, min_rows: int = 32) -> None:
     """Call ``kernel(v0, v1, *args)`` over bands of rows covering ``[0, h)``, in parallel."""
-    limit = getattr(_local, "limit", None)
-    n = min(get_num_threads() if limit is None else min(limit, get_num_threads()), max(1, h // min_rows))
+    n = min(threads_here(), max(1, h // min_rows))
     if n <= 1:
         kernel(0, h, *args)
         return

@@ -16,7 +16,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from ._parallel import _pool, get_num_threads, thread_limit
+from ._parallel import _pool, thread_limit, threads_here
 from .camera import Intrinsics, as_intrinsics
 
 __all__ = ["estimate_normals_batch", "frame_intrinsics", "map_threads"]
@@ -69,7 +69,8 @@ def map_threads(func: Callable[[T], R], items: Sequence[T], *, threads: int | No
     items : sequence
         Its inputs.
     threads : int, optional
-        Worker threads; default :func:`depthnormals.get_num_threads`.
+        Worker threads; default :func:`depthnormals.get_num_threads` (capped by the
+        thread's :func:`~depthnormals._parallel.thread_limit`: nested calls stay serial).
     on_done : callable, optional
         Progress callback.
 
@@ -79,7 +80,7 @@ def map_threads(func: Callable[[T], R], items: Sequence[T], *, threads: int | No
         The results, in the order of ``items``.
     """
     n = len(items)
-    workers = min(get_num_threads() if threads is None else int(threads), n)
+    workers = min(threads_here() if threads is None else int(threads), n)
     results: list[Any] = [None] * n
     if workers <= 1:
         for i, item in enumerate(items):

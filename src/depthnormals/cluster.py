@@ -179,10 +179,10 @@ def map_batches(func: Callable[[T], R], items: Iterable[T], *, client: Any = Non
             on_done(item, result)
 
     if client is None:
-        from ._parallel import get_num_threads
+        from ._parallel import threads_here
         from .batch import map_threads
 
-        n = get_num_threads() if threads is None else threads
+        n = threads_here() if threads is None else threads
         # bounded chunks so that an iterator of frames is never read whole into memory
         for chunk in _chunks(items, max(1, n) * 8):
             map_threads(func, chunk, threads=n, on_done=lambda i, r, c=chunk: done(c[i], r))

@@ -62,6 +62,9 @@ def run_many(args: argparse.Namespace) -> int:
     from ..jobs import run_estimate
     from ..registry import DEFAULT_METHOD
 
+    if args.output.suffix.lower() in (".npy", ".png", ".ply") and not args.output.is_dir():
+        raise ValueError(f"with many inputs (or --scheduler), -o is a folder; got the file name "
+                         f"{args.output} (choose the format with --format)")
     K = read_intrinsics(args.intrinsics) if args.intrinsics is not None else None
     method = args.method or DEFAULT_METHOD
     s = run_estimate(args.depth, args.output, method=method, K=K, options=parse_options(args.option),
