@@ -10,7 +10,9 @@ Compared at equal cores:
 
 with tasks of ``--batch`` frames. Both clusters are started (and every worker warmed up on
 one frame) before the clock; the runs are interleaved and repeated, and the medians
-compared: overhead = median(cluster) / median(serial) - 1.
+compared: overhead = median(cluster) / median(serial) - 1, for the wall time and for the CPU
+time (this process, which holds the LocalCluster's scheduler, plus every worker process; on
+a machine shared with other jobs the CPU time is the steadier of the two).
 
     python benchmarks/dask_scaling.py [--frames 64] [--batch 16] [--rounds 3]
 """
@@ -32,7 +34,9 @@ from depthnormals.jobs import run_estimate
 
 
 def main() -> None:
-    from distributed import Client, LocalCluster
+    from distributed import Client
+
+    from depthnormals.cluster import local_cluster
 
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--frames", type=int, default=64)
@@ -48,16 +52,18 @@ def main() -> None:
             np.save(src / f"{i:04d}.npy", z)
         runs = iter(range(10**6))
 
-        def run(**kw) -> float:
-            t0 = time.perf_counter()
-            s = run_estimate([src], root / f"out{next(runs)}", method=args.method, K=K,
-                             batch_size=args.batch, **kw)
-            assert s.written == args.frames
-            return time.perf_counter() - t0
+        def worker_cpu(client) -> float:
+            return 0.0 if client is None else sum(client.run(time.process_time).values())
 
-        env = {"DEPTHNORMALS_NUM_THREADS": "1"}
-        clusters = {n: LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                    dashboard_address=":0", env=env) for n in (1, 2)}
+        def run(name: str, client=None) -> None:
+            c0, w0, t0 = time.process_time(), worker_cpu(client), time.perf_counter()
+            s = run_estimate([src], root / f"out{next(runs)}", method=args.method, K=K,
+                             batch_size=args.batch, client=client)
+            times[name].append(time.perf_counter() - t0)
+            cpu[name].append(time.process_time() - c0 + worker_cpu(client) - w0)
+            assert s.written == args.frames
+
+        clusters = {n: local_cluster(n, threads=1) for n in (1, 2)}
         clients = {n: Client(c) for n, c in clusters.items()}
         try:
             one = [src / "0000.npy"]
@@ -67,13 +73,14 @@ def main() -> None:
             names = ("serial, 1 thread", "LocalCluster, 1 worker", "serial, 2 threads",
                      "LocalCluster, 2 workers")
             times: dict[str, list[float]] = {n: [] for n in names}
+            cpu: dict[str, list[float]] = {n: [] for n in names}
             for _ in range(args.rounds):
                 dn.set_num_threads(1)
-                times[names[0]].append(run())
-                times[names[1]].append(run(client=clients[1]))
+                run(names[0])
+                run(names[1], clients[1])
                 dn.set_num_threads(2)
-                times[names[2]].append(run())
-                times[names[3]].append(run(client=clients[2]))
+                run(names[2])
+                run(names[3], clients[2])
         finally:
             for c in clients.values():
                 c.close()
@@ -83,11 +90,13 @@ def main() -> None:
           f"{args.rounds} interleaved rounds; {machine_description()['cpu']}, "
           f"{machine_description()['usable_cores']} cores")
     med = {n: statistics.median(ts) for n, ts in times.items()}
+    mcpu = {n: statistics.median(cs) for n, cs in cpu.items()}
     for n, ts in times.items():
         print(f"  {n:<24} {args.frames / med[n]:6.1f} frames/s  (median {med[n]:.3f} s; runs "
-              f"{' '.join(f'{t:.3f}' for t in ts)})")
+              f"{' '.join(f'{t:.3f}' for t in ts)}); CPU {1e3 * mcpu[n] / args.frames:.1f} ms/frame")
     for serial, dask in ((names[0], names[1]), (names[2], names[3])):
-        print(f"overhead {dask} vs {serial}: {100 * (med[dask] / med[serial] - 1):+.1f} %")
+        print(f"overhead {dask} vs {serial}: wall {100 * (med[dask] / med[serial] - 1):+.1f} %, "
+              f"CPU {100 * (mcpu[dask] / mcpu[serial] - 1):+.1f} %")
 
 
 if __name__ == "__main__":

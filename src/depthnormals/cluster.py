@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from itertools import islice
 from typing import Any, TypeVar
 
-__all__ = ["Progress", "SchedulerSpec", "connect", "map_batches", "parse_scheduler"]
+__all__ = ["Progress", "SchedulerSpec", "connect", "local_cluster", "map_batches", "parse_scheduler"]
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -40,6 +40,13 @@ R = TypeVar("R")
 DEFAULT_BATCH = 16
 #: Tasks kept in flight per worker thread: enough to hide the round trip, few enough to bound memory.
 _INFLIGHT_PER_THREAD = 2
+#: glibc malloc settings of the worker processes we start. Dask's default
+#: (``MALLOC_TRIM_THRESHOLD_=65536``) fixes the mmap threshold at 128 KiB, so every frame-sized
+#: temporary is a fresh mmap, page-faulted in again: 42,700 minor faults and about +30 % CPU
+#: per 16 frames of 640x480 3f2n+ measured in a worker, against 5 faults in a plain process.
+#: With these (the values glibc's own heuristic reaches in a plain process) the worker's
+#: compute thread costs what the serial run costs (benchmarks/dask_scaling.py).
+WORKER_MALLOC_ENV = {"MALLOC_MMAP_THRESHOLD_": "33554432", "MALLOC_TRIM_THRESHOLD_": "268435456"}
 
 
 @dataclass(frozen=True)
@@ -95,23 +102,17 @@ def _cores() -> int:
 def connect(scheduler: str | SchedulerSpec) -> Iterator[Any]:
     """A ``distributed.Client`` for ``scheduler``, closed (with its local cluster) on exit.
 
-    A local cluster has ``N`` worker processes (default: one per core) with one thread each,
-    the dashboard on a free port, and ``DEPTHNORMALS_NUM_THREADS`` set so that the workers together use the
-    cores once: ``max(1, cores // N)`` row-band threads each. Workers of a remote scheduler
+    A local cluster (:func:`local_cluster`) has ``N`` worker processes (default: one per
+    core) with one thread each. Workers of a remote scheduler
     keep their own settings (set ``DEPTHNORMALS_NUM_THREADS`` where they are started).
     """
     spec = parse_scheduler(scheduler) if isinstance(scheduler, str) else scheduler
     try:
-        from distributed import Client, LocalCluster
+        from distributed import Client
     except ImportError as exc:
         raise ImportError("--scheduler needs Dask: pip install 'depthnormals[dask]'") from exc
     if spec.local:
-        n = spec.workers or _cores()
-        env = {"DEPTHNORMALS_NUM_THREADS": str(max(1, _cores() // n))}
-        # ":0": the scheduler's HTTP server (dashboard, health) on a free port; with None it
-        # still tries 8787 and warns when another cluster has it
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                               dashboard_address=":0", env=env)
+        cluster = local_cluster(spec.workers or _cores())
         try:
             with Client(cluster) as client:
                 yield client
@@ -120,6 +121,27 @@ def connect(scheduler: str | SchedulerSpec) -> Iterator[Any]:
     else:
         with Client(spec.address, timeout="30s") as client:
             yield client
+
+
+def local_cluster(n_workers: int, *, threads: int | None = None) -> Any:
+    """A ``distributed.LocalCluster`` of ``n_workers`` single-threaded worker processes.
+
+    Each worker runs the estimators with ``threads`` row-band threads (default
+    ``max(1, cores // n_workers)``: together they use the cores once) and the malloc settings
+    of :data:`WORKER_MALLOC_ENV`; the scheduler's HTTP server listens on a free port (with
+    ``dashboard_address=None`` it would still try 8787, and warn when another cluster has it).
+    The caller closes it.
+    """
+    import dask
+    from distributed import LocalCluster
+
+    env = {"DEPTHNORMALS_NUM_THREADS": str(threads or max(1, _cores() // n_workers))}
+    # set before the worker processes start (distributed's "pre-spawn-environ"); an explicit
+    # value in os.environ still wins there, as distributed documents
+    spawn = {f"distributed.nanny.pre-spawn-environ.{k}": v for k, v in WORKER_MALLOC_ENV.items()}
+    with dask.config.set(spawn):
+        return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                            dashboard_address=":0", env=env)
 
 
 def _run_batch(func: Callable[[T], R], items: Sequence[T]) -> list[R]:
