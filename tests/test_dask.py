@@ -147,8 +147,7 @@ def test_import_stays_light():
 def _faults_per_frame(n: int) -> float:
     import resource
 
-    z = np.ones((480, 640), np.float32) * 2.0
-    z[::7, ::5] = 0.0
+    z = np.repeat(np.repeat(_frame(n), 10, axis=0), 10, axis=1)  # 480 x 640, noisy, holes
     dn.estimate_normals(z, K, method="3f2n+")  # warm: compiled, heap grown
     r0 = resource.getrusage(resource.RUSAGE_THREAD).ru_minflt
     for _ in range(n):
@@ -158,7 +157,7 @@ def _faults_per_frame(n: int) -> float:
 
 def test_workers_reuse_their_heap(client):
     """Our worker processes keep frame-sized temporaries on the heap (WORKER_MALLOC_ENV): with
-    Dask's default malloc setting each 640x480 3f2n+ frame page-faults ~2,700 times again."""
+    Dask's default malloc setting each 640x480 3f2n+ frame page-faults again (755 times here)."""
     envs = client.run(lambda: os.environ.get("MALLOC_MMAP_THRESHOLD_"))
     assert set(envs.values()) == {cluster.WORKER_MALLOC_ENV["MALLOC_MMAP_THRESHOLD_"]}
-    assert client.submit(_faults_per_frame, 3, pure=False).result() < 200
+    assert client.submit(_faults_per_frame, 3, pure=False).result() < 100  # 0 measured; 755 with the default
