@@ -161,3 +161,40 @@ def test_workers_reuse_their_heap(client):
     envs = client.run(lambda: os.environ.get("MALLOC_MMAP_THRESHOLD_"))
     assert set(envs.values()) == {cluster.WORKER_MALLOC_ENV["MALLOC_MMAP_THRESHOLD_"]}
     assert client.submit(_faults_per_frame, 3, pure=False).result() < 100  # 0 measured; 755 with the default
+
+
+def _without_ms(obj):
+    """A JSON tree without its timings (keys containing 'ms')."""
+    if isinstance(obj, dict):
+        return {k: _without_ms(v) for k, v in obj.items() if "ms" not in k}
+    if isinstance(obj, list):
+        return [_without_ms(v) for v in obj]
+    return obj
+
+
+def test_evaluate_on_cluster_equals_serial(client, tmp_path, capsys):
+    import csv
+    import json
+
+    from depthnormals.cli import main
+    from depthnormals.synth import generate
+
+    generate(tmp_path / "ds", indoor=1, outdoor=1, views=2, size=(36, 48), K=(27.0, 27.0, 23.5, 17.5),
+             noise=("gaussian:sigma=0.01",), progress=False)
+    base = ["evaluate", str(tmp_path / "ds"), "-m", "3f2n,d2nt+", "--figures", "0", "-q"]
+    assert main([*base, "-o", str(tmp_path / "serial")]) == 0
+    dask = [*base, "-o", str(tmp_path / "dask"), "--scheduler", client.scheduler.address, "--batch-size", "3"]
+    assert main(dask) == 0
+    out = capsys.readouterr().out
+    assert "16 rows (16 computed, 0 reused" in out  # serial run
+    assert "16 rows (0 computed, 16 reused" in out  # the Dask run: every part done by the workers
+
+    def rows(name):
+        with (tmp_path / name / "results.csv").open() as fh:
+            return [{k: v for k, v in r.items() if k != "ms"} for r in csv.DictReader(fh)]
+
+    assert len(rows("serial")) == 16 and rows("serial") == rows("dask")
+    assert _without_ms(json.loads((tmp_path / "serial" / "summary.json").read_text())) == \
+        _without_ms(json.loads((tmp_path / "dask" / "summary.json").read_text()))
+    assert main(dask) == 0  # resumed: nothing left for the workers
+    assert "16 rows (0 computed, 16 reused" in capsys.readouterr().out
