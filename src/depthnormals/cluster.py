@@ -206,7 +206,7 @@ def map_batches(func: Callable[[T], R], items: Iterable[T], *, client: Any = Non
 
         n = threads_here() if threads is None else threads
         # bounded chunks so that an iterator of frames is never read whole into memory
-        for chunk in _chunks(items, max(1, n) * 8):
+        for chunk in _chunks(items, max(1, n) * 32):
             map_threads(func, chunk, threads=n, on_done=lambda i, r, c=chunk: done(c[i], r))
         return results
 
