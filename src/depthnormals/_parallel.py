@@ -8,16 +8,19 @@ gufunc: several seconds per kernel on a fresh install) while using every core.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
-__all__ = ["get_num_threads", "run_rows", "set_num_threads"]
+__all__ = ["get_num_threads", "run_rows", "set_num_threads", "thread_limit", "threads_here"]
 
 _lock = threading.Lock()
 _state: dict[str, Any] = {"threads": None, "pool": None, "pool_size": 0}
+#: Per-thread cap on the row bands of :func:`run_rows` (see :func:`thread_limit`).
+_local = threading.local()
 
 
 def _default_threads() -> int:
@@ -66,9 +69,30 @@ def _pool(size: int) -> ThreadPoolExecutor:
         return _state["pool"]
 
 
+@contextlib.contextmanager
+def thread_limit(n: int) -> Iterator[None]:
+    """Cap the row bands of :func:`run_rows` to ``n`` threads for calls made on this thread.
+
+    Thread-local, so workers that each run one whole frame (``depthnormals.batch``) run it
+    serially inside without touching the setting of other threads: the pool never nests.
+    """
+    old = getattr(_local, "limit", None)
+    _local.limit = n if old is None else min(n, old)
+    try:
+        yield
+    finally:
+        _local.limit = old
+
+
+def threads_here() -> int:
+    """:func:`get_num_threads`, capped by the :func:`thread_limit` of the calling thread."""
+    limit = getattr(_local, "limit", None)
+    return get_num_threads() if limit is None else min(limit, get_num_threads())
+
+
 def run_rows(kernel: Callable[..., None], h: int, *args: Any, min_rows: int = 32) -> None:
     """Call ``kernel(v0, v1, *args)`` over bands of rows covering ``[0, h)``, in parallel."""
-    n = min(get_num_threads(), max(1, h // min_rows))
+    n = min(threads_here(), max(1, h // min_rows))
     if n <= 1:
         kernel(0, h, *args)
         return

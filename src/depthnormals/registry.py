@@ -122,10 +122,11 @@ def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
 
     Parameters
     ----------
-    depth : array_like, shape (H, W)
+    depth : array_like, shape (H, W) or (N, H, W)
         Planar depth z. float32/float64; integers need ``depth_scale``. Invalid depth
-        (0, negative, NaN, inf) gives a NaN normal.
-    K : Intrinsics, array (3, 3) or (fx, fy, cx, cy)
+        (0, negative, NaN, inf) gives a NaN normal. A stack of N frames is spread over the
+        threads, one frame per thread (:func:`depthnormals.batch.estimate_normals_batch`).
+    K : Intrinsics, array (3, 3) or (fx, fy, cx, cy); for a stack also (N, 3, 3) or N of those
         Camera intrinsics in pixels, 0-based pixel centres.
     method : str
         A name from :func:`methods`; ``"<name>+"`` adds the discontinuity discrimination
@@ -138,7 +139,7 @@ def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
 
     Returns
     -------
-    normals : ndarray, shape (H, W, 3), float32
+    normals : ndarray, shape (H, W, 3) or (N, H, W, 3), float32
         Unit normals in the OpenCV camera frame facing the camera (``dot(n, X) < 0``),
         NaN where no estimate is possible.
 
@@ -151,6 +152,10 @@ def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
     """
     if not isinstance(method, str):
         raise TypeError(f"method must be a string; got {type(method).__name__}")
+    if np.ndim(depth) == 3:  # a stack of frames (N, H, W): one frame per thread
+        from .batch import estimate_normals_batch
+
+        return estimate_normals_batch(depth, K, method=method, depth_scale=depth_scale, **options)
     _load()
     if method.endswith("+") and method[:-1] in _REGISTRY and _has_ddm():
         ddm = importlib.import_module("depthnormals.ddm")

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-HELP = "estimate the normals of a depth image and write them (.npy, .png 16-bit, .vis.png)"
+HELP = "estimate the normals of depth images and write them (.npy, .png 16-bit, .vis.png, .ply)"
 
 #: Exit status when no pixel of the input depth is valid (see ``depthnormals --help``).
 EXIT_NO_VALID_PIXEL = 3
@@ -24,11 +24,16 @@ FIRST_RUN_S = 50
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("depth", type=Path, help="depth file: .npy, .png (16-bit), .tif, .bin")
-    parser.add_argument("--intrinsics", "-K", type=Path, required=True,
-                        help="intrinsics file: .json/.yaml (fx, fy, cx, cy or K) or 3F2N params.txt")
+    parser.add_argument("depth", type=Path, nargs="+",
+                        help="depth file: .npy, .png (16-bit), .tif, .bin; or many: files, globs "
+                             "('seq/*.png'), folders, dataset folders (then -o is a folder)")
+    parser.add_argument("--intrinsics", "-K", type=Path, default=None,
+                        help="intrinsics file: .json/.yaml (fx, fy, cx, cy or K) or 3F2N params.txt "
+                             "(required for depth files; dataset folders bring their own)")
     parser.add_argument("-o", "--output", type=Path, required=True,
-                        help="output: .npy (float32), .png (16-bit) or .vis.png (8-bit picture)")
+                        help="output: .npy (float32), .png (16-bit), .vis.png (8-bit picture) or .ply "
+                             "(point cloud with normals); "
+                             "with many inputs, a folder")
     parser.add_argument("--method", "-m", default=None, help="estimator (see `depthnormals methods`)")
     parser.add_argument("--depth-scale", type=float, default=None,
                         help="metres per unit of integer depth (e.g. 0.001 for millimetres)")
@@ -37,6 +42,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "format); for other formats it must match the file")
     parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                         help="estimator option, e.g. --option kernel=sobel (repeatable; JSON values)")
+    many = parser.add_argument_group("many inputs (output folder -o DIR)")
+    many.add_argument("--format", default="npy", choices=("npy", "png", "vis.png", "ply"),
+                      help="output format of each frame (default npy)")
+    many.add_argument("--no-resume", action="store_true",
+                      help="recompute frames whose output exists (default: skip them)")
+    many.add_argument("--quiet", "-q", action="store_true", help="no progress")
+    many.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                      help="run on Dask: local, local:N (N worker processes) or tcp://host:port of "
+                           "a running `dask scheduler` (needs the dask extra)")
+    many.add_argument("--batch-size", type=int, default=16,
+                      help="frames per Dask task (default 16)")
 
 
 def parse_shape(text: str) -> tuple[int, int]:
@@ -65,6 +81,30 @@ def parse_options(items: list[str]) -> dict:
     return out
 
 
+def _many(args: argparse.Namespace) -> bool:
+    """The many-frames form: several inputs, a folder or glob, a scheduler, or -o an existing folder."""
+    return (len(args.depth) > 1 or args.depth[0].is_dir() or args.output.is_dir()
+            or args.scheduler is not None or any(c in str(args.depth[0]) for c in "*?["))
+
+
+def run_many(args: argparse.Namespace) -> int:
+    from ..io import read_intrinsics
+    from ..jobs import run_estimate
+    from ..registry import DEFAULT_METHOD
+
+    if args.output.suffix.lower() in (".npy", ".png", ".ply") and not args.output.is_dir():
+        raise ValueError(f"with many inputs (or --scheduler), -o is a folder; got the file name "
+                         f"{args.output} (choose the format with --format)")
+    K = read_intrinsics(args.intrinsics) if args.intrinsics is not None else None
+    method = args.method or DEFAULT_METHOD
+    s = run_estimate(args.depth, args.output, method=method, K=K, options=parse_options(args.option),
+                     depth_scale=args.depth_scale, fmt=args.format, resume=not args.no_resume,
+                     progress=not args.quiet, scheduler=args.scheduler, batch_size=args.batch_size)
+    print(f"{args.output}: {s.planned} frames by {method} ({s.written} computed, {s.skipped} done "
+          f"before) in {s.seconds:.1f} s")
+    return 0
+
+
 @dataclass(frozen=True)
 class EstimateReport:
     """What :func:`estimate_file` did: output path, size, method, valid inputs and outputs, time."""
@@ -90,7 +130,7 @@ def estimate_file(depth_path: Path, intrinsics_path: Path, output: Path, *,
 
     import numpy as np
 
-    from ..io import read_depth, read_intrinsics, write_normals
+    from ..io import read_depth, read_intrinsics, write_normals, write_ply
     from ..registry import DEFAULT_METHOD, estimate_normals
 
     depth = read_depth(depth_path, depth_scale=depth_scale, shape=shape)
@@ -102,13 +142,21 @@ def estimate_file(depth_path: Path, intrinsics_path: Path, output: Path, *,
     t0 = time.perf_counter()
     normals = estimate_normals(depth, K, method=method, **(options or {}))
     ms = (time.perf_counter() - t0) * 1e3
-    write_normals(output, normals)
+    if output.suffix.lower() == ".ply":  # a point cloud: valid points with their normals
+        write_ply(output, depth, K, normals)
+    else:
+        write_normals(output, normals)
     valid_depth = int(np.count_nonzero(np.isfinite(depth) & (depth > 0)))
     valid = int(np.count_nonzero(np.isfinite(normals[..., 0])))
     return EstimateReport(output, depth.shape, method, valid_depth, valid, ms)
 
 
 def run(args: argparse.Namespace) -> int:
+    if _many(args):
+        return run_many(args)
+    args.depth = args.depth[0]
+    if args.intrinsics is None:
+        raise ValueError("--intrinsics/-K is required for a depth file")
     rep = estimate_file(args.depth, args.intrinsics, args.output, method=args.method,
                         depth_scale=args.depth_scale, shape=args.shape,
                         options=parse_options(args.option))

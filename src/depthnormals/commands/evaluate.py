@@ -54,6 +54,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-resume", action="store_true",
                         help="recompute every (frame, method) even if an earlier run finished it")
     parser.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+    parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                        help="estimate and score on Dask: local, local:N (N worker processes) or "
+                             "tcp://host:port of a running `dask scheduler` (needs the dask extra)")
+    parser.add_argument("--batch-size", type=int, default=8, help="frames per Dask task (default 8)")
 
 
 def parse_method_options(items: list[str]) -> dict[str, dict]:
@@ -99,12 +103,20 @@ def run(args: argparse.Namespace) -> int:
     protocol = Protocol(folded=args.errors == "folded", border=args.border, invalid=args.invalid,
                         edge_radius=args.edge_radius, edge_angle=args.edge_angle,
                         depth_jump=args.depth_jump)
+    resume = not args.no_resume
+    if args.scheduler is not None:  # the (frame, method) parts on Dask; the run below reuses them
+        from ..evaluate._cluster import compute_parts
+
+        compute_parts(args.dataset, args.methods, args.out, scheduler=args.scheduler, protocol=protocol,
+                      method_options=parse_method_options(args.option), frames=args.frames,
+                      resume=resume, batch_size=args.batch_size, progress=not args.quiet)
+        resume = True
     res = run_evaluation(
         args.dataset, args.methods, args.out, protocol=protocol,
         method_options=parse_method_options(args.option), frames=args.frames,
         group_levels=_levels(args.group_levels),
         figures=figures_or_skip(args.figures), figure_method=args.figure_method,
-        error_vmax=args.error_vmax, threads=args.threads, resume=not args.no_resume,
+        error_vmax=args.error_vmax, threads=args.threads, resume=resume,
         progress=not args.quiet,
     )
     labels = [m["label"] for m in res.settings["methods"]]

@@ -34,6 +34,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also export the clean frames to the 3F2N format in DIR")
     parser.add_argument("--no-progress", action="store_true",
                         help="no progress on stderr (a bar on a terminal, one line per view otherwise)")
+    parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                        help="render on Dask: local, local:N (N worker processes) or tcp://host:port "
+                             "of a running `dask scheduler` (needs the dask extra)")
+    parser.add_argument("--batch-size", type=int, default=16, help="views per Dask task (default 16)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -55,7 +59,8 @@ def run(args: argparse.Namespace) -> int:
     summary = generate(args.out, indoor=args.indoor, outdoor=args.outdoor, views=args.views,
                        seed=args.seed, noise=noise, meshes=args.mesh, K=K,
                        size=(args.height, args.width), constraints=constraints,
-                       progress=not args.no_progress)
+                       progress=not args.no_progress, scheduler=args.scheduler,
+                       batch_size=args.batch_size)
     print(f"{summary.root}: {summary.frames} views ({summary.written} rendered, {summary.skipped} "
           f"already there) in {summary.seconds:.1f} s; clean render {summary.render_ms_per_frame:.1f} "
           "ms per frame")

@@ -79,7 +79,8 @@ def _count(name: str, value: Any, minimum: int) -> int:
 def generate(out: str | Path, *, indoor: int = 10, outdoor: int = 10, views: int = 25, seed: int = 0,
              noise: Sequence[str] = ("kinect_v2",), meshes: Sequence[str | Path] = (),
              K: Any = KINECT_V2, size: tuple[int, int] = KINECT_V2_SIZE, near: float = 0.05,
-             constraints: PoseConstraints | None = None, progress: bool = True) -> SynthSummary:
+             constraints: PoseConstraints | None = None, progress: bool = True,
+             scheduler: str | None = None, batch_size: int = 16) -> SynthSummary:
     """Render a synthetic benchmark into ``out`` (clean frames plus one variant per noise model).
 
     Scene ``i`` of a kind uses recipe ``i mod 10`` of that kind (:func:`scene_names`) with its
@@ -112,6 +113,12 @@ def generate(out: str | Path, *, indoor: int = 10, outdoor: int = 10, views: int
         Camera acceptance rules (default ``PoseConstraints()``).
     progress : bool, keyword-only
         Report progress on stderr (a tqdm bar on a terminal, else one line per view).
+    scheduler : str, optional, keyword-only
+        ``"local"``, ``"local:N"`` or ``"tcp://host:port"``: render on Dask
+        (:func:`depthnormals.cluster.connect`; camera poses one task per scene, then views in
+        tasks of ``batch_size``); the files are byte-identical to a serial run's.
+    batch_size : int, keyword-only
+        Views per Dask task.
 
     Returns
     -------
@@ -202,6 +209,14 @@ def generate(out: str | Path, *, indoor: int = 10, outdoor: int = 10, views: int
     except OSError as exc:
         raise OSError(f"cannot write to output folder {root}: {exc.strerror or exc}") from exc
 
+    if scheduler is not None:
+        from ._cluster import generate_on_cluster
+
+        written, skipped, t_render = generate_on_cluster(
+            scheduler, root, plan, [str(Path(p).absolute()) for p in meshes], views, seed, models, cam,
+            (h, w), near, constraints, progress=progress, batch_size=batch_size)
+        return SynthSummary(root, len(plan) * views, written, skipped, time.perf_counter() - t_start,
+                            t_render)
     bar = Progress("synth", total=len(plan) * views, unit="view", enabled=progress)
     written = skipped = 0
     t_render = 0.0
@@ -220,30 +235,44 @@ def generate(out: str | Path, *, indoor: int = 10, outdoor: int = 10, views: int
             for sub in ("normals", "valid", "clean", *models):
                 (sdir / sub).mkdir(parents=True, exist_ok=True)
             for view in range(views):
-                done = _view_files(sdir, view, models)
-                if all(p.is_file() for p in done):
+                seconds = _write_view(sdir, scene, poses[view], view, models, seed, kid, i, cam,
+                                      (h, w), near)
+                if seconds is None:
                     skipped += 1
-                    bar.update()
-                    continue
-                t0 = time.perf_counter()
-                r = render_mesh(scene.vertices, scene.faces, cam, pose=poses[view], width=w,
-                                height=h, near=near)
-                t_render += time.perf_counter() - t0
-                if not np.any(r.face >= 0):
-                    raise ValueError(f"{kind}/{folder} view {view}: the camera sees nothing")
-                _save_npy(done[0], r.normals.astype(np.float32))
-                _save_npy(done[1], r.face >= 0)
-                _save_npy(done[2], r.depth.astype(np.float32))
-                for k, (name, st) in enumerate(models.items()):
-                    rng = _rng(seed, kid, i, 2 + _noise.MODELS.index(name), view)
-                    noisy = _apply_model(name, st, r, scene, poses[view], cam, (h, w), near, rng)
-                    _save_npy(done[3 + k], noisy.astype(np.float32))
-                written += 1
+                else:
+                    t_render += seconds
+                    written += 1
                 bar.update()
     finally:
         bar.close()
     return SynthSummary(root, len(plan) * views, written, skipped, time.perf_counter() - t_start,
                         t_render)
+
+
+def _write_view(sdir: Path, scene: Scene, pose: np.ndarray, view: int, models: dict, seed: int, kid: int,
+                i: int, cam, size: tuple[int, int], near: float) -> float | None:
+    """Render view ``view`` of a scene and write its files (atomically); None if all exist.
+
+    Returns the seconds of the clean render. The unit of work of :func:`generate`, serial
+    or on a Dask worker (``depthnormals.synth._cluster``): the same bytes either way.
+    """
+    done = _view_files(sdir, view, models)
+    if all(p.is_file() for p in done):
+        return None
+    h, w = size
+    t0 = time.perf_counter()
+    r = render_mesh(scene.vertices, scene.faces, cam, pose=pose, width=w, height=h, near=near)
+    seconds = time.perf_counter() - t0
+    if not np.any(r.face >= 0):
+        raise ValueError(f"{sdir.parent.name}/{sdir.name} view {view}: the camera sees nothing")
+    _save_npy(done[0], r.normals.astype(np.float32))
+    _save_npy(done[1], r.face >= 0)
+    _save_npy(done[2], r.depth.astype(np.float32))
+    for k, (name, st) in enumerate(models.items()):
+        rng = _rng(seed, kid, i, 2 + _noise.MODELS.index(name), view)
+        noisy = _apply_model(name, st, r, scene, pose, cam, size, near, rng)
+        _save_npy(done[3 + k], noisy.astype(np.float32))
+    return seconds
 
 
 def _view_files(sdir: Path, view: int, models: dict) -> list[Path]:
