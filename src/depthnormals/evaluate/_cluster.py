@@ -7,26 +7,22 @@ the key the serial run uses; the command then runs :func:`run_evaluation`, which
 part done and writes ``results.csv``, the summaries and the figures as a serial run does
 (``ms`` measured on the workers).
 
-Interim: :func:`_frame_parts` repeats the per-frame body of :func:`run_evaluation`'s loop
-(estimate, near-edge mask, score, save). When ``_run.py`` exposes its per-frame unit, call
-that here instead (see the report of issue 15).
+:func:`_frame_parts` is the part-computing half of ``_run._evaluate_frame`` (no tally, no
+figures), built from the same pieces: ``_part_key``, ``_estimate``, ``_near_mask``, ``_row``.
 """
 
 from __future__ import annotations
 
-import time
 from collections.abc import Mapping, Sequence
 from functools import partial
 from itertools import islice
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from ..datasets import Frame
 from ._methods import MethodSpec, resolve_methods
-from ._protocol import Protocol, discontinuity_mask, score_frame
-from ._run import _WARMUP_PX, _row
+from ._protocol import Protocol, score_frame
+from ._run import _estimate, _near_mask, _part_key, _row
 from ._store import PartStore
 
 __all__ = ["compute_parts"]
@@ -34,33 +30,19 @@ __all__ = ["compute_parts"]
 _warmed: set[str] = set()  # per worker process: methods already compiled and run once
 
 
-def _key(store: PartStore, dataset_id: str, frame: Frame, spec: MethodSpec, protocol: Protocol) -> str:
-    return store.key(dataset=dataset_id, group=frame.group, frame=frame.name, method=spec.method,
-                     options=spec.options, protocol=protocol.as_dict())
-
-
 def _frame_parts(frame: Frame, *, specs: Sequence[MethodSpec], protocol: Protocol, dataset_id: str,
                  parts: str, resume: bool) -> int:
     """Compute and store the missing parts of one frame (on a worker); returns how many."""
-    from ..registry import estimate_normals
-
     store = PartStore(Path(parts))
     near = None
     done = 0
     for spec in specs:
-        key = _key(store, dataset_id, frame, spec, protocol)
+        key = _part_key(store, dataset_id, frame, spec, protocol)
         if resume and store.load(key) is not None:
             continue
-        if spec.label not in _warmed:
-            crop = np.ascontiguousarray(frame.depth[:_WARMUP_PX, :_WARMUP_PX])
-            estimate_normals(crop, frame.K, method=spec.method, **spec.options)
-            _warmed.add(spec.label)
-        t0 = time.perf_counter()
-        est = estimate_normals(frame.depth, frame.K, method=spec.method, **spec.options)
-        ms = (time.perf_counter() - t0) * 1e3
+        est, ms = _estimate(spec, frame, _warmed)
         if near is None:
-            near = discontinuity_mask(frame.normals, frame.depth, frame.mask, radius=protocol.edge_radius,
-                                      edge_angle=protocol.edge_angle, depth_jump=protocol.depth_jump)
+            near = _near_mask(frame, protocol)
         score = score_frame(est, frame.normals, mask=frame.mask, near=near, protocol=protocol)
         store.save(key, _row(frame, spec.label, score, ms), score.hist)
         done += 1
@@ -107,7 +89,7 @@ def compute_parts(dataset: str | Path, methods: str | Sequence[str], out_dir: st
 
     def todo():
         for frame in islice(datasets.open(path), frames):
-            if resume and all(store.load(_key(store, dataset_id, frame, s, protocol)) is not None
+            if resume and all(store.load(_part_key(store, dataset_id, frame, s, protocol)) is not None
                               for s in specs):
                 continue
             yield frame

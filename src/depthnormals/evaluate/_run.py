@@ -256,17 +256,31 @@ class _Tally:
             self.hists[key] = hist.astype(np.int64, copy=True)
 
 
-def _estimate(spec: MethodSpec, frame: Frame, tally: _Tally) -> tuple[np.ndarray, float]:
-    """The estimate of one method on one frame and its wall time in ms (compilation excluded)."""
+def _estimate(spec: MethodSpec, frame: Frame, warmed: set[str]) -> tuple[np.ndarray, float]:
+    """The estimate of one method on one frame and its wall time in ms (compilation excluded:
+    a method not in ``warmed`` first runs on a small crop, then joins it)."""
     from ..registry import estimate_normals
 
-    if spec.label not in tally.warmed:
+    if spec.label not in warmed:
         crop = np.ascontiguousarray(frame.depth[:_WARMUP_PX, :_WARMUP_PX])
         estimate_normals(crop, frame.K, method=spec.method, **spec.options)
-        tally.warmed.add(spec.label)
+        warmed.add(spec.label)
     t0 = time.perf_counter()
     est = estimate_normals(frame.depth, frame.K, method=spec.method, **spec.options)
     return est, (time.perf_counter() - t0) * 1e3
+
+
+def _part_key(store: PartStore, dataset_id: str, frame: Frame, spec: MethodSpec,
+              protocol: Protocol) -> str:
+    """The store key of one (frame, method) part (the serial and the Dask runs share it)."""
+    return store.key(dataset=dataset_id, group=frame.group, frame=frame.name,
+                     method=spec.method, options=spec.options, protocol=protocol.as_dict())
+
+
+def _near_mask(frame: Frame, protocol: Protocol) -> np.ndarray:
+    """The frame's near-discontinuity band under ``protocol``."""
+    return discontinuity_mask(frame.normals, frame.depth, frame.mask, radius=protocol.edge_radius,
+                              edge_angle=protocol.edge_angle, depth_jump=protocol.depth_jump)
 
 
 def _evaluate_frame(frame: Frame, plan: EvaluationPlan, store: PartStore, dataset_id: str,
@@ -285,16 +299,12 @@ def _evaluate_frame(frame: Frame, plan: EvaluationPlan, store: PartStore, datase
     fig_errors: dict[str, np.ndarray] = {}
     fig_estimate = None
     for spec in plan.methods:
-        key = store.key(dataset=dataset_id, group=frame.group, frame=frame.name,
-                        method=spec.method, options=spec.options, protocol=protocol.as_dict())
+        key = _part_key(store, dataset_id, frame, spec, protocol)
         got = store.load(key) if resume else None
         if got is None or want_fig:
-            est, ms = _estimate(spec, frame, tally)
+            est, ms = _estimate(spec, frame, tally.warmed)
             if near is None:
-                near = discontinuity_mask(frame.normals, frame.depth, frame.mask,
-                                          radius=protocol.edge_radius,
-                                          edge_angle=protocol.edge_angle,
-                                          depth_jump=protocol.depth_jump)
+                near = _near_mask(frame, protocol)
             score = score_frame(est, frame.normals, mask=frame.mask, near=near, protocol=protocol)
             if want_fig:
                 fig_errors[spec.label] = score.error
