@@ -87,7 +87,7 @@ def cases() -> list[tuple[str, str, dict]]:
     return out
 
 
-def compute(quick: bool = False) -> dict[str, str]:
+def compute(quick: bool = False, match: str = "") -> dict[str, str]:
     result = {}
     sc = scenes()
     for threads in (1, 2):
@@ -98,6 +98,8 @@ def compute(quick: bool = False) -> dict[str, str]:
             for dtype in (np.float32, np.float64):
                 d = np.asarray(depth, dtype=dtype)
                 for method, label, opts in cases():
+                    if match and not f"{method}|{label}".startswith(match):
+                        continue
                     n = dn.estimate_normals(d, K, method=method, **_spell(opts))
                     key = f"{method}|{label}|{sname}|{np.dtype(dtype).name}|t{threads}"
                     result[key] = hashlib.sha256(np.ascontiguousarray(n).tobytes()).hexdigest()
@@ -110,8 +112,9 @@ def main() -> int:
     g.add_argument("--write", type=Path)
     g.add_argument("--check", type=Path)
     p.add_argument("--quick", action="store_true", help="skip the torus-knot frame")
+    p.add_argument("--match", default="", help="only the cases whose 'method|label' starts so")
     a = p.parse_args()
-    got = compute(a.quick)
+    got = compute(a.quick, a.match)
     if a.write:
         a.write.write_text(json.dumps(got, indent=1, sort_keys=True))
         print(f"{len(got)} hashes written to {a.write}")

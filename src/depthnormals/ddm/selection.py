@@ -22,7 +22,7 @@ from ..kernels.depth import C_FX, C_FY, C_INF, C_MAX, C_ONE, C_ZERO, Pinhole, ro
 from ..kernels.orient import store_normal
 
 __all__ = ["CROSS", "SQUARE", "clamp_key", "cross_select_row", "inconsistency", "inconsistency_pq",
-           "select_min", "select_ring_row"]
+           "select_min", "select_ring_row", "select_ring_row_fixed"]
 
 # candidate offsets (dv, du), self first (self wins ties). CROSS is the public code's order:
 # self, up, left, right, down.
@@ -340,6 +340,25 @@ def select_ring_row(q, h, zb, nb3, kb, acol, bcol, c, selfw, eps, bx, by, bz, ou
         out[q, u, 0] = bx[u]
         out[q, u, 1] = by[u]
         out[q, u, 2] = bz[u]
+
+
+@nb.njit(**_INL)
+def select_ring_row_fixed(q, h, ring, acol, bcol, c, selfw, eps, consistent, out_row):
+    """:func:`select_ring_row` (``ring = (zb, nb3, kb)``) for callers that know at compile time
+    whether the consistency test is on (``consistent``, a constant: ``eps >= 0``): only the
+    kernel they need is compiled, which matters on the first run. Writes ``out_row``."""
+    zb, nb3, kb = ring
+    a = (q - 1) % 3 if q > 0 else 3
+    s = (q + 1) % 3 if q + 1 < h else 3
+    m = q % 3
+    z3 = (zb[a], zb[m], zb[s])
+    n3 = ((nb3[a, 0], nb3[a, 1], nb3[a, 2]), (nb3[m, 0], nb3[m, 1], nb3[m, 2]),
+          (nb3[s, 0], nb3[s, 1], nb3[s, 2]))
+    k3 = (kb[a], kb[m], kb[s])
+    if consistent:
+        _cross_consistent(z3, n3, k3, acol, bcol[q], c, selfw, eps, out_row)
+    else:
+        _cross_plain(z3, n3, k3, acol, bcol[q], c, selfw, eps, out_row)
 
 
 def select_min(z, normals, key, offs, fx, fy, cx, cy, out, self_weight=1.0, consistency=None):

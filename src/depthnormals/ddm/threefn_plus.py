@@ -29,7 +29,7 @@ from ..kernels.threefn_rows import NEIGHBOURS8, Filters, RowScratch, row_normals
 from ._module import _SIM_MODES, ModuleOptions, _refine
 from .crf_ring import crf_flush, crf_ring_row, ring_slots, scratch, sim_coefficients, similarity_ring_row
 from .curvature import mean_max_row, row_constants
-from .selection import select_ring_row
+from .selection import select_ring_row_fixed
 
 __all__ = ["PlusCrf", "PlusSelection", "fused_3f2n_plus", "fused_plus"]
 
@@ -42,18 +42,20 @@ PlusSelection = namedtuple("PlusSelection", ["kc", "use_max", "self_weight", "ep
 PlusCrf = namedtuple("PlusCrf", ["on", "sa", "sb", "sigma", "lam"])
 
 
-@nb.njit(cache=True, error_model="numpy", nogil=True)
-def _plus_rows(v0, v1, rows, cam, filters, select, crf_args, out, kout, want_k):
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _plus_body(v0, v1, rows, cam, filters, select, crf_args, out, kout, want_k, crf, consistent):
     """3F2N+ of rows [v0, v1) into ``out`` (H, W, 3) float32 and, with ``want_k``, the
     curvature into ``kout`` (H, W) float64.
 
     ``rows``: :data:`RowInputs` (``D`` is ``z``: the FD pass); ``cam``: :class:`Pinhole`;
     ``filters``: :data:`Filters` of 3F2N; ``select``: :data:`PlusSelection`; ``crf_args``:
-    :data:`PlusCrf`.
+    :data:`PlusCrf`. ``crf`` (the CRF stage) and ``consistent`` (the consistency test) are
+    compile-time constants of the four kernels below, so a call compiles only the stages it
+    runs (the first run of the default ``3f2n+`` compiles no CRF).
     """
     z, _, R, c, acol, bcol = rows
     kc, use_max, selfw, eps = select
-    crf, sa, sb, sigma, lam = crf_args
+    _, sa, sb, sigma, lam = crf_args
     h, w = z.shape
     nbuf = np.full((4, 3, w + 2), np.nan, dtype=z.dtype)  # rows r % 3; slot 3: outside image
     kbuf = np.full((4, w + 2), np.inf, dtype=z.dtype)
@@ -93,13 +95,17 @@ def _plus_rows(v0, v1, rows, cam, filters, select, crf_args, out, kout, want_k):
         t = r - 1  # selection of row t (rows t - 1 .. t + 1 computed)
         if not crf:
             if v0 <= t < v1:
-                select_ring_row(t, h, zbuf, nbuf, kbuf, acol, bcol, c, selfw, eps, bx, by, bz,
-                                out)
+                select_ring_row_fixed(t, h, (zbuf, nbuf, kbuf), acol, bcol, c, selfw, eps,
+                                      consistent, (bx, by, bz))
+                for u in range(w):
+                    out[t, u, 0] = bx[u]
+                    out[t, u, 1] = by[u]
+                    out[t, u, 2] = bz[u]
             continue
         if max(v0 - 1, 0) <= t < h:  # into the float32 ring, as the separate path stores it
             st = sel[t % 4]
-            select_ring_row(t, h, zbuf, nbuf, kbuf, acol, bcol, c, selfw, eps, st[0, 1:w + 1],
-                            st[1, 1:w + 1], st[2, 1:w + 1], None)
+            select_ring_row_fixed(t, h, (zbuf, nbuf, kbuf), acol, bcol, c, selfw, eps, consistent,
+                                  (st[0, 1:w + 1], st[1, 1:w + 1], st[2, 1:w + 1]))
             similarity_ring_row(t, h, zbuf, sa, sb, sim, hsum)
         q = r - 2  # CRF of row q (selected rows q - 1 .. q + 1 done)
         if v0 <= q < v1:
@@ -111,6 +117,35 @@ def _plus_rows(v0, v1, rows, cam, filters, select, crf_args, out, kout, want_k):
                                 (sigma, lam), work, pend, cam, out)
     if crf:
         crf_flush(z, work, pend, sigma, cam, out)
+
+
+@nb.njit(cache=True, error_model="numpy", nogil=True)
+def _plus_rows_select(v0, v1, rows, cam, filters, select, crf_args, out, kout, want_k):
+    """:func:`_plus_body` without the CRF, without the consistency test."""
+    _plus_body(v0, v1, rows, cam, filters, select, crf_args, out, kout, want_k, False, False)
+
+
+@nb.njit(cache=True, error_model="numpy", nogil=True)
+def _plus_rows_select_consistent(v0, v1, rows, cam, filters, select, crf_args, out, kout, want_k):
+    """:func:`_plus_body` without the CRF, with the consistency test (the default 3f2n+)."""
+    _plus_body(v0, v1, rows, cam, filters, select, crf_args, out, kout, want_k, False, True)
+
+
+@nb.njit(cache=True, error_model="numpy", nogil=True)
+def _plus_rows_crf(v0, v1, rows, cam, filters, select, crf_args, out, kout, want_k):
+    """:func:`_plus_body` with the CRF, without the consistency test."""
+    _plus_body(v0, v1, rows, cam, filters, select, crf_args, out, kout, want_k, True, False)
+
+
+@nb.njit(cache=True, error_model="numpy", nogil=True)
+def _plus_rows_crf_consistent(v0, v1, rows, cam, filters, select, crf_args, out, kout, want_k):
+    """:func:`_plus_body` with the CRF and the consistency test."""
+    _plus_body(v0, v1, rows, cam, filters, select, crf_args, out, kout, want_k, True, True)
+
+
+#: The fused kernels by (CRF, consistency test).
+_PLUS_ROWS = {(False, False): _plus_rows_select, (False, True): _plus_rows_select_consistent,
+              (True, False): _plus_rows_crf, (True, True): _plus_rows_crf_consistent}
 
 
 def fused_3f2n_plus(z: np.ndarray, fx: float, fy: float, cx: float, cy: float, *, mode: int,
@@ -139,7 +174,8 @@ def fused_3f2n_plus(z: np.ndarray, fx: float, fy: float, cx: float, cy: float, *
     select = PlusSelection(kc, use_max, float(self_weight),
                            -1.0 if consistency is None else float(consistency))
     crf_args = PlusCrf(crf is not None, sa, sb, float(sigma), float(lam))
-    run_rows(_plus_rows, h, rows, Pinhole(float(fx), float(fy), float(cx), float(cy)), filters,
+    kernel = _PLUS_ROWS[(crf is not None, consistency is not None)]
+    run_rows(kernel, h, rows, Pinhole(float(fx), float(fy), float(cx), float(cy)), filters,
              select, crf_args, out, kout, want_curvature)
     return out, (kout if want_curvature else None)
 
