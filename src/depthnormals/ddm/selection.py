@@ -22,7 +22,7 @@ from ..kernels.depth import C_FX, C_FY, C_INF, C_MAX, C_ONE, C_ZERO, Pinhole, ro
 from ..kernels.orient import store_normal
 
 __all__ = ["CROSS", "SQUARE", "clamp_key", "cross_select_row", "inconsistency", "inconsistency_pq",
-           "select_min", "select_ring_row", "select_ring_row_fixed"]
+           "select_min", "select_ring_row"]
 
 # candidate offsets (dv, du), self first (self wins ties). CROSS is the public code's order:
 # self, up, left, right, down.
@@ -298,8 +298,12 @@ def fill_padded(zrow, nrow, krow, zb, nb3, kb):
             nb3[j, u + 1] = nrow[u, j]
 
 
-@nb.njit(**_JIT)
-def _select_rows(v0, v1, z, normals, key, offs, cross, cam, c, acol, bcol, selfw, eps, out):
+@nb.njit(**_INL)
+def _select_body(v0, v1, z, normals, key, offs, cam, c, acol, bcol, selfw, eps, out, cross,
+                 consistent):
+    """Selection of rows [v0, v1) into ``out``; ``cross`` (the cross neighbourhood: the
+    vectorised row kernel) and ``consistent`` (``eps >= 0``) are compile-time constants of the
+    kernels below."""
     fx, fy, cx, cy = cam
     h, w = z.shape
     if not cross:
@@ -318,35 +322,41 @@ def _select_rows(v0, v1, z, normals, key, offs, cross, cam, c, acol, bcol, selfw
         fill_padded(z[r], normals[r], key[r], zb[r % 3], nb3[r % 3], kb[r % 3])
         for q in range(r - 1, r + 1 if r == h - 1 else r):  # the last row has none below
             if v0 <= q < v1:
-                select_ring_row(q, h, zb, nb3, kb, acol, bcol, c, selfw, eps, bx, by, bz, out)
+                select_ring_row(q, h, (zb, nb3, kb), acol, bcol, c, selfw, eps, consistent,
+                                (bx, by, bz))
+                for u in range(w):
+                    out[q, u, 0] = bx[u]
+                    out[q, u, 1] = by[u]
+                    out[q, u, 2] = bz[u]
 
 
-@nb.njit(cache=True, error_model="numpy")
-def select_ring_row(q, h, zb, nb3, kb, acol, bcol, c, selfw, eps, bx, by, bz, out):
-    """:func:`cross_select_row` for row ``q`` from ring buffers (slot ``row % 3``, slot 3:
-    outside the image) of padded depth ``zb``, planar normals ``nb3`` and keys ``kb``, once
-    rows q - 1 .. q + 1 are in them; the result goes into ``bx, by, bz`` and (unless
-    ``out`` is None) ``out[q]``."""
-    a = (q - 1) % 3 if q > 0 else 3
-    s = (q + 1) % 3 if q + 1 < h else 3
-    m = q % 3
-    cross_select_row((zb[a], zb[m], zb[s]),
-                     ((nb3[a, 0], nb3[a, 1], nb3[a, 2]), (nb3[m, 0], nb3[m, 1], nb3[m, 2]),
-                      (nb3[s, 0], nb3[s, 1], nb3[s, 2])),
-                     (kb[a], kb[m], kb[s]), acol, bcol[q], c, selfw, eps, (bx, by, bz))
-    if out is None:
-        return
-    for u in range(bx.size):
-        out[q, u, 0] = bx[u]
-        out[q, u, 1] = by[u]
-        out[q, u, 2] = bz[u]
+@nb.njit(**_JIT)
+def _select_rows_pixel(v0, v1, z, normals, key, offs, cam, c, acol, bcol, selfw, eps, out):
+    """Any neighbourhood, per pixel (:func:`_select_pixel`)."""
+    _select_body(v0, v1, z, normals, key, offs, cam, c, acol, bcol, selfw, eps, out, False, False)
+
+
+@nb.njit(**_JIT)
+def _select_rows_cross(v0, v1, z, normals, key, offs, cam, c, acol, bcol, selfw, eps, out):
+    """The cross neighbourhood, vectorised, without the consistency test."""
+    _select_body(v0, v1, z, normals, key, offs, cam, c, acol, bcol, selfw, eps, out, True, False)
+
+
+@nb.njit(**_JIT)
+def _select_rows_cross_consistent(v0, v1, z, normals, key, offs, cam, c, acol, bcol, selfw, eps,
+                                  out):
+    """The cross neighbourhood, vectorised, with the consistency test."""
+    _select_body(v0, v1, z, normals, key, offs, cam, c, acol, bcol, selfw, eps, out, True, True)
 
 
 @nb.njit(**_INL)
-def select_ring_row_fixed(q, h, ring, acol, bcol, c, selfw, eps, consistent, out_row):
-    """:func:`select_ring_row` (``ring = (zb, nb3, kb)``) for callers that know at compile time
-    whether the consistency test is on (``consistent``, a constant: ``eps >= 0``): only the
-    kernel they need is compiled, which matters on the first run. Writes ``out_row``."""
+def select_ring_row(q, h, ring, acol, bcol, c, selfw, eps, consistent, out_row):
+    """:func:`cross_select_row` for row ``q`` from ring buffers ``ring = (zb, nb3, kb)`` (slot
+    ``row % 3``, slot 3: outside the image) of padded depth, planar normals and keys, once rows
+    q - 1 .. q + 1 are in them; writes ``out_row = (bx, by, bz)``.
+
+    ``consistent`` (``eps >= 0``: the consistency test) must be a compile-time constant of the
+    caller: only the kernel it needs is compiled, which matters on the first run."""
     zb, nb3, kb = ring
     a = (q - 1) % 3 if q > 0 else 3
     s = (q + 1) % 3 if q + 1 < h else 3
@@ -374,6 +384,8 @@ def select_min(z, normals, key, offs, fx, fy, cx, cy, out, self_weight=1.0, cons
     cross = offs.shape == CROSS.shape and bool((offs == CROSS).all())
     c, acol, bcol = row_arrays(z, fx, fy, cx, cy)
     eps = -1.0 if consistency is None else float(consistency)
-    run_rows(_select_rows, z.shape[0], z, normals, key, offs, cross,
+    kernel = (_select_rows_pixel if not cross else
+              _select_rows_cross_consistent if eps >= 0.0 else _select_rows_cross)
+    run_rows(kernel, z.shape[0], z, normals, key, offs,
              Pinhole(float(fx), float(fy), float(cx), float(cy)), c, acol, bcol, float(self_weight),
              eps, out)

@@ -29,7 +29,7 @@ from ..kernels.threefn_rows import NEIGHBOURS8, Filters, RowScratch, row_normals
 from ._module import _SIM_MODES, ModuleOptions, _refine
 from .crf_ring import crf_flush, crf_ring_row, ring_slots, scratch, sim_coefficients, similarity_ring_row
 from .curvature import mean_max_row, row_constants
-from .selection import select_ring_row_fixed
+from .selection import select_ring_row
 
 __all__ = ["PlusCrf", "PlusSelection", "fused_3f2n_plus", "fused_plus"]
 
@@ -95,8 +95,8 @@ def _plus_body(v0, v1, rows, cam, filters, select, crf_args, out, kout, want_k, 
         t = r - 1  # selection of row t (rows t - 1 .. t + 1 computed)
         if not crf:
             if v0 <= t < v1:
-                select_ring_row_fixed(t, h, (zbuf, nbuf, kbuf), acol, bcol, c, selfw, eps,
-                                      consistent, (bx, by, bz))
+                select_ring_row(t, h, (zbuf, nbuf, kbuf), acol, bcol, c, selfw, eps, consistent,
+                                (bx, by, bz))
                 for u in range(w):
                     out[t, u, 0] = bx[u]
                     out[t, u, 1] = by[u]
@@ -104,8 +104,8 @@ def _plus_body(v0, v1, rows, cam, filters, select, crf_args, out, kout, want_k, 
             continue
         if max(v0 - 1, 0) <= t < h:  # into the float32 ring, as the separate path stores it
             st = sel[t % 4]
-            select_ring_row_fixed(t, h, (zbuf, nbuf, kbuf), acol, bcol, c, selfw, eps, consistent,
-                                  (st[0, 1:w + 1], st[1, 1:w + 1], st[2, 1:w + 1]))
+            select_ring_row(t, h, (zbuf, nbuf, kbuf), acol, bcol, c, selfw, eps, consistent,
+                            (st[0, 1:w + 1], st[1, 1:w + 1], st[2, 1:w + 1]))
             similarity_ring_row(t, h, zbuf, sa, sb, sim, hsum)
         q = r - 2  # CRF of row q (selected rows q - 1 .. q + 1 done)
         if v0 <= q < v1:
