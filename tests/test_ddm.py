@@ -188,7 +188,7 @@ def test_crf_with_zero_lambda_is_the_curvature_selection(box):
                                      lambda_=0.0)
     np.testing.assert_array_equal(a, b)
     c = discontinuity_discrimination(n0, r.depth, r.K, correlation="none", crf=True,
-                                     lambda_=0.05, iterations=2)
+                                     lambda_=0.05, crf_iterations=2)
     assert not np.array_equal(a, c, equal_nan=True)
 
 
@@ -216,8 +216,8 @@ def test_depth_scale_invariance_of_the_metric_kinds(box):
     ({"curvature": "sharp"}, ValueError),
     ({"correlation": "spearman"}, ValueError),
     ({"crf": "yes"}, TypeError),
-    ({"iterations": 0}, ValueError),
-    ({"iterations": 1.5}, TypeError),
+    ({"crf_iterations": 0}, ValueError),
+    ({"crf_iterations": 1.5}, TypeError),
     ({"lambda_": -1.0}, ValueError),
     ({"sigma": "1"}, TypeError),
     ({"curvature": "none", "crf": True}, ValueError),
@@ -293,3 +293,60 @@ def test_ablate_needs_exactly_one_source(capsys):
 
     assert main(["ablate", "--table", "1"]) == 1
     assert "exactly one" in capsys.readouterr().err
+
+
+# --- option names: one meaning per name on every method ----------------------------------
+
+def test_no_estimator_option_shadows_a_module_option():
+    module = set(dn.ddm.module_defaults())
+    for name in dn.methods(refined=False):
+        assert not set(dn.get_estimator(name).options) & module, name
+
+
+def test_the_registry_refuses_an_estimator_option_that_shadows_the_module():
+    from depthnormals.registry import register
+
+    def f(depth, K, *, crf_iterations=1, depth_scale=None):
+        return depth
+
+    with pytest.raises(ValueError, match="crf_iterations"):
+        register("shadowing-test", f)
+    assert "shadowing-test" not in dn.methods()
+
+
+def test_old_module_option_spelling_names_the_new_one(box):
+    r, _ = box
+    with pytest.raises(TypeError, match="crf_iterations"):
+        dn.estimate_normals(r.depth, r.K, method="d2nt+", crf=True, iterations=2)
+    with pytest.raises(TypeError, match="crf_iterations"):
+        dn.estimate_normals(r.depth, r.K, method="3f2n+", iterations=2)
+    n0 = dn.three_filters_to_normal(r.depth, r.K)
+    with pytest.raises(TypeError, match="crf_iterations"):
+        discontinuity_discrimination(n0, r.depth, r.K, iterations=2)
+
+
+def test_sda_sne_plus_iterations_are_sda_snes_and_crf_iterations_the_modules(box):
+    r, _ = box
+    base = dn.sda_sne(r.depth, r.K, iterations=1)
+    want = discontinuity_discrimination(base, r.depth, r.K, crf=True, crf_iterations=2)
+    got = dn.estimate_normals(r.depth, r.K, method="sda-sne+", iterations=1, crf=True,
+                              crf_iterations=2)
+    np.testing.assert_array_equal(got, want)
+    assert not np.array_equal(got, dn.estimate_normals(r.depth, r.K, method="sda-sne+", crf=True),
+                              equal_nan=True)
+
+
+def test_module_options_as_one_value_equal_the_keywords(box):
+    r, _ = box
+    n0 = dn.three_filters_to_normal(r.depth, r.K)
+    opts = dn.ddm.ModuleOptions(correlation="kendall", crf=True, crf_iterations=2)
+    np.testing.assert_array_equal(
+        discontinuity_discrimination(n0, r.depth, r.K, options=opts),
+        discontinuity_discrimination(n0, r.depth, r.K, correlation="kendall", crf=True,
+                                     crf_iterations=2))
+    with pytest.raises(TypeError, match="not both"):
+        discontinuity_discrimination(n0, r.depth, r.K, options=opts, crf=True)
+    with pytest.raises(TypeError, match="unknown option"):
+        discontinuity_discrimination(n0, r.depth, r.K, curvatur="mean")
+    with pytest.raises(ValueError, match="crf_iterations"):
+        dn.ddm.ModuleOptions(crf_iterations=0)

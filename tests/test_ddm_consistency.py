@@ -7,7 +7,7 @@ import pytest
 
 import depthnormals as dn
 from depthnormals.analytic import make_scene
-from depthnormals.ddm.crf import inconsistency
+from depthnormals.ddm.selection import inconsistency
 
 K = (262.5, 262.5, 159.5, 119.5)
 

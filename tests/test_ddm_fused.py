@@ -1,4 +1,4 @@
-"""The fused 3F2N+ pass (ddm/fused.py) equals 3F2N followed by the separate module, and the
+"""The fused 3F2N+ pass (ddm/threefn_plus.py) equals 3F2N followed by the separate module, and the
 CRF's vectorised skip test is exact (a brute-force minimisation agrees)."""
 
 from __future__ import annotations
@@ -9,9 +9,10 @@ import pytest
 import depthnormals as dn
 from depthnormals.ddm import fused_plus
 from depthnormals.ddm.correlation import kendall_map
-from depthnormals.ddm.crf import CROSS, crf_step
-from depthnormals.ddm.fused import fused_3f2n_plus
-from depthnormals.estimators._common import prepare, row_dtype
+from depthnormals.ddm.crf import crf_step
+from depthnormals.ddm.selection import CROSS
+from depthnormals.ddm.threefn_plus import fused_3f2n_plus
+from depthnormals.kernels.depth import prepare, row_dtype
 
 K = (131.25, 131.25, 79.5, 59.5)  # conftest.ROUGH_K: the rough scene's intrinsics
 
@@ -42,7 +43,7 @@ def _agree(a, b, *, max_deg=1e-3):
     {"self_weight": 1.0},
     {"correlation": "kendall"},
     {"correlation": "kendall", "crf": True},
-    {"correlation": "kendall-prose", "crf": True, "lambda_": 0.05, "iterations": 2},
+    {"correlation": "kendall-prose", "crf": True, "lambda_": 0.05, "crf_iterations": 2},
     {"consistency": None},
     {"consistency": None, "correlation": "kendall", "crf": True},
     {"consistency": None, "correlation": "kendall", "crf": True, "lambda_": 0.1},
@@ -54,7 +55,7 @@ def test_fused_equals_estimator_then_module(rough, dtype, opts):
     z = rough.astype(dtype)
     own = {k: v for k, v in opts.items() if k == "aggregate"}
     rest = {k: v for k, v in opts.items() if k != "aggregate"}
-    fused = fused_plus("3f2n", z, K, None, own, rest)
+    fused = fused_plus(z, K, None, own, rest)
     assert fused is not None
     assert np.array_equal(fused, dn.estimate_normals(z, K, method="3f2n+", **opts), equal_nan=True)
     base = dn.three_filters_to_normal(z, K, **own)
@@ -69,13 +70,12 @@ def test_fused_equals_estimator_then_module(rough, dtype, opts):
     ({}, {"selection": "plane-fit"}), ({}, {"derivatives": "depth"}),
 ])
 def test_fused_path_declines_what_it_does_not_implement(rough, own, rest):
-    assert fused_plus("3f2n", rough, K, None, own, rest) is None
-    assert fused_plus("d2nt", rough, K, None, {}, {}) is None
+    assert fused_plus(rough, K, None, own, rest) is None
 
 
 def test_fused_path_validates_module_options(rough):
     with pytest.raises(ValueError, match="self_weight"):
-        fused_plus("3f2n", rough, K, None, {}, {"self_weight": 0.0})
+        fused_plus(rough, K, None, {}, {"self_weight": 0.0})
 
 
 def _brute_force_crf(z, n0, kq, tau, sigma, lam):

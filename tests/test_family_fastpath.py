@@ -10,7 +10,7 @@ import pytest
 
 import depthnormals as dn
 from depthnormals.estimators import pointcloud, range_image
-from depthnormals.estimators._eig3 import smallest_eigenvector, smallest_eigenvector_newton
+from depthnormals.kernels.eig3 import smallest_eigenvector, smallest_eigenvector_newton
 
 FAMILY = ("sda-sne", "sne-roadseg", "fals", "sri", "line-mod", "plane-svd", "plane-pca",
           "vector-svd", "area-weighted", "angle-weighted")
@@ -46,7 +46,7 @@ def test_fals_fast_path_equals_general_path(rough, window):
 
 
 def test_sri_fast_path_equals_general_path(rough):
-    from depthnormals.estimators._stencils import gradient_kernels
+    from depthnormals.kernels.stencils import gradient_kernels
     deriv, smooth = gradient_kernels("sobel", 5)
     R = np.empty(rough.shape)
     range_image._range_rows(0, rough.shape[0], rough, *K, R)
@@ -116,7 +116,7 @@ def test_degenerate_shapes_and_extreme_depths_never_raise(method, shape):
 
 def test_sne_roadseg_fast_path_equals_general_path(rough):
     from depthnormals.estimators import roadseg
-    from depthnormals.estimators._stencils import gradient_kernels
+    from depthnormals.kernels.stencils import gradient_kernels
     deriv, smooth = gradient_kernels("fd", 3)
     D = np.divide(1.0, rough)
     out = np.full((*rough.shape, 3), np.nan, np.float32)
@@ -150,7 +150,7 @@ def test_3f2n_fast_row_pass_equals_general_path(rough, dtype, aggregate):
     Sign flips are allowed only where the normal is perpendicular to the ray (the facing
     rule is then decided by rounding)."""
     from depthnormals.estimators import threefn
-    from depthnormals.estimators._common import NEIGHBOURS8
+    from depthnormals.kernels.threefn_rows import NEIGHBOURS8, generic_normal
 
     z = rough.astype(dtype)
     fast = dn.three_filters_to_normal(z, K, aggregate=aggregate)
@@ -158,8 +158,8 @@ def test_3f2n_fast_row_pass_equals_general_path(rough, dtype, aggregate):
     slow = np.full((*z.shape, 3), np.nan, np.float32)
     for v in range(z.shape[0]):
         for u in range(z.shape[1]):
-            slow[v, u] = threefn.generic_normal(z, z, True, v, u, *K, np.array([-0.5, 0.0, 0.5]),
-                                                np.ones(1), False, mode, NEIGHBOURS8, np.empty(8))
+            slow[v, u] = generic_normal(z, z, True, v, u, *K, np.array([-0.5, 0.0, 0.5]),
+                                       np.ones(1), False, mode, NEIGHBOURS8, np.empty(8))
     na, nb_ = np.isnan(fast[..., 0]), np.isnan(slow[..., 0])
     assert (na == nb_).all()
     err = dn.angular_error(fast, slow, folded=True)[~na]

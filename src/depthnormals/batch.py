@@ -130,12 +130,16 @@ def map_threads(func: Callable[[T], R], items: Sequence[T], *, threads: int | No
     return results
 
 
-def estimate_normals_batch(depth: Any, K: Any, *, method: str, depth_scale: float | None = None,
-                           **options: Any) -> np.ndarray:
+def estimate_normals_batch(estimate: Callable[..., np.ndarray], depth: Any, K: Any, *, method: str,
+                           depth_scale: float | None = None, **options: Any) -> np.ndarray:
     """Normals of a stack of depth frames, frames spread over threads.
 
     Parameters
     ----------
+    estimate : callable
+        The single-frame dispatcher, ``estimate(depth, K, method=..., depth_scale=..., **options)``
+        (:func:`depthnormals.estimate_normals`, which passes itself: this layer does not import
+        the registry).
     depth : array_like, shape (N, H, W)
         N planar depth frames, metres (or integer units with ``depth_scale``).
     K : Intrinsics, array (3, 3), (fx, fy, cx, cy), array (N, 3, 3) or sequence of N Intrinsics
@@ -157,8 +161,6 @@ def estimate_normals_batch(depth: Any, K: Any, *, method: str, depth_scale: floa
     Interpretation: a 3-D array whose last axis has length 1 is taken for a single-channel
     image, not for N frames of width 1, and rejected with the hint of the 2-D check.
     """
-    from .registry import estimate_normals
-
     arr = depth if isinstance(depth, np.ndarray) else np.asarray(depth)
     if arr.ndim != 3:
         raise ValueError(f"a batch of depth frames must have shape (N, H, W); got shape {arr.shape}")
@@ -172,7 +174,7 @@ def estimate_normals_batch(depth: Any, K: Any, *, method: str, depth_scale: floa
     out = np.empty((n, h, w, 3), dtype=np.float32)
 
     def one(i: int) -> None:
-        out[i] = estimate_normals(arr[i], cams[i], method=method, depth_scale=depth_scale, **options)
+        out[i] = estimate(arr[i], cams[i], method=method, depth_scale=depth_scale, **options)
 
     map_threads(one, range(n))
     return out

@@ -1,21 +1,46 @@
 """The estimator registry and the one dispatcher over it.
 
-Every estimator is a public function ``f(depth, K, *, option=..., depth_scale=None)`` that
-registers itself here with :func:`register`. ``estimate_normals(depth, K, method=name)`` looks
-the name up; ``"<name>+"`` is estimator ``<name>`` followed by the discontinuity
-discrimination module (:func:`depthnormals.ddm.discontinuity_discrimination`).
+Every estimator is a public function ``f(depth, K, *, option=..., depth_scale=None)`` in
+:mod:`depthnormals.estimators`; :data:`ESTIMATORS` below names each one, in plain imports (the
+estimators know nothing of the registry). ``estimate_normals(depth, K, method=name)`` looks the
+name up; ``"<name>+"`` is estimator ``<name>`` followed by the discontinuity discrimination
+module (:func:`depthnormals.ddm.discontinuity_discrimination`), or its fused one-pass form
+where :data:`FUSED_PLUS` has one (``"3f2n+"``: :mod:`depthnormals.ddm.threefn_plus`).
+
+Adding an estimator: write its function in ``estimators/<file>.py``, export it from
+``estimators/__init__.py`` and add one line to :data:`ESTIMATORS`.
 """
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
 import inspect
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+from . import ddm
+from .ddm.threefn_plus import fused_plus as _fused_3f2n_plus
+from .estimators import (
+    angle_weighted,
+    area_weighted,
+    cross_product,
+    d2nt,
+    fals,
+    line_mod,
+    pcl_average_3d_gradient,
+    pcl_average_depth_change,
+    pcl_covariance_matrix,
+    pcl_simple_3d_gradient,
+    plane_pca,
+    plane_svd,
+    sda_sne,
+    sne_roadseg,
+    sri,
+    three_filters_to_normal,
+    vector_svd,
+)
 
 __all__ = ["EstimatorInfo", "estimate_normals", "get_estimator", "methods", "register"]
 
@@ -47,33 +72,61 @@ class EstimatorInfo:
     summary: str
 
 
+#: Every estimator: (name, function, scale invariant). Scale invariant: scaling depth by a
+#: constant leaves the normals unchanged (tested in tests/test_properties.py).
+ESTIMATORS: tuple[tuple[str, Callable[..., np.ndarray], bool], ...] = (
+    ("3f2n", three_filters_to_normal, True),
+    ("angle-weighted", angle_weighted, True),
+    ("area-weighted", area_weighted, True),
+    ("cross-product", cross_product, True),
+    ("d2nt", d2nt, False),
+    ("fals", fals, True),
+    ("line-mod", line_mod, False),
+    # PCL's integral-image modes: metric depth-change thresholds, so not scale invariant
+    ("pcl-average-3d-gradient", pcl_average_3d_gradient, False),
+    ("pcl-average-depth-change", pcl_average_depth_change, False),
+    ("pcl-covariance-matrix", pcl_covariance_matrix, False),
+    ("pcl-simple-3d-gradient", pcl_simple_3d_gradient, False),
+    ("plane-pca", plane_pca, True),
+    ("plane-svd", plane_svd, True),
+    ("sda-sne", sda_sne, False),
+    ("sne-roadseg", sne_roadseg, True),
+    ("sri", sri, True),
+    ("vector-svd", vector_svd, True),
+)
+
+#: ``"<name>+"`` in one fused pass: ``f(depth, K, depth_scale, estimator_options,
+#: module_options)`` returns the normals, or None where the options have no fused form.
+FUSED_PLUS: dict[str, Callable[..., np.ndarray | None]] = {"3f2n": _fused_3f2n_plus}
+
 _REGISTRY: dict[str, EstimatorInfo] = {}
 
 
-def register(name: str, *, scale_invariant: bool = True) -> Callable[[Callable], Callable]:
-    """Class the decorated function as estimator ``name`` (decorator)."""
+def register(name: str, func: Callable[..., np.ndarray], *, scale_invariant: bool = True) -> None:
+    """Add ``func`` as estimator ``name`` (for estimators outside this package).
 
-    def deco(func: Callable) -> Callable:
-        if name in _REGISTRY or name.endswith("+"):
-            raise ValueError(f"estimator name {name!r} is taken or reserved")
-        params = inspect.signature(func).parameters
-        options = tuple(
-            p.name for p in params.values()
-            if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name != "depth_scale"
-        )
-        doc = (func.__doc__ or "").strip().splitlines()
-        _REGISTRY[name] = EstimatorInfo(name, func, options, scale_invariant, doc[0] if doc else "")
-        return func
+    ``func(depth, K, *, option=..., depth_scale=None)``; its keyword-only options must not
+    reuse a name of the module's options (:func:`depthnormals.ddm.module_defaults`), so that
+    ``"<name>+"`` gives every option one meaning.
+    """
+    if not isinstance(name, str) or not name or name in _REGISTRY or name.endswith("+"):
+        raise ValueError(f"estimator name {name!r} is taken or reserved")
+    params = inspect.signature(func).parameters
+    options = tuple(
+        p.name for p in params.values()
+        if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name != "depth_scale"
+    )
+    clash = sorted(set(options) & set(ddm.module_defaults()))
+    if clash:
+        raise ValueError(f"estimator {name!r}: option(s) {clash} are also options of the "
+                         f"discontinuity module, so {name + '+'!r} would give them two meanings; "
+                         "rename them")
+    doc = (func.__doc__ or "").strip().splitlines()
+    _REGISTRY[name] = EstimatorInfo(name, func, options, scale_invariant, doc[0] if doc else "")
 
-    return deco
 
-
-def _load() -> None:
-    importlib.import_module("depthnormals.estimators")
-
-
-def _has_ddm() -> bool:
-    return importlib.util.find_spec("depthnormals.ddm") is not None
+for _name, _func, _invariant in ESTIMATORS:
+    register(_name, _func, scale_invariant=_invariant)
 
 
 def methods(*, refined: bool = True) -> tuple[str, ...]:
@@ -85,16 +138,14 @@ def methods(*, refined: bool = True) -> tuple[str, ...]:
         Also list the ``"<name>+"`` forms (estimator followed by the discontinuity
         discrimination module).
     """
-    _load()
     base = sorted(_REGISTRY)
-    if refined and _has_ddm():
+    if refined:
         return tuple(sorted(base + [n + "+" for n in base]))
     return tuple(base)
 
 
 def get_estimator(name: str) -> EstimatorInfo:
     """The :class:`EstimatorInfo` of a base name; ValueError listing the valid ones otherwise."""
-    _load()
     if not isinstance(name, str):
         raise TypeError(f"method must be a string; got {type(name).__name__}")
     if name not in _REGISTRY:
@@ -107,6 +158,10 @@ def _split_options(method: str, info: EstimatorInfo, options: dict[str, Any],
     own = {k: v for k, v in options.items() if k in info.options}
     rest = {k: v for k, v in options.items() if k not in info.options}
     unknown = [k for k in rest if k not in extra]
+    for k in unknown if extra else ():
+        err = ddm.renamed_option_error(k, f"method {method!r}")
+        if err is not None:
+            raise err
     if unknown:
         valid = sorted(info.options + extra)
         raise TypeError(
@@ -155,19 +210,19 @@ def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
     if np.ndim(depth) == 3:  # a stack of frames (N, H, W): one frame per thread
         from .batch import estimate_normals_batch
 
-        return estimate_normals_batch(depth, K, method=method, depth_scale=depth_scale, **options)
-    _load()
-    if method.endswith("+") and method[:-1] in _REGISTRY and _has_ddm():
-        ddm = importlib.import_module("depthnormals.ddm")
-        info = _REGISTRY[method[:-1]]
-        refine = ddm.discontinuity_discrimination
-        ddm_opts = tuple(ddm.module_defaults())
-        own, rest = _split_options(method, info, options, ddm_opts)
-        fused = ddm.fused_plus(method[:-1], depth, K, depth_scale, own, rest)
-        if fused is not None:
-            return fused
+        return estimate_normals_batch(estimate_normals, depth, K, method=method, depth_scale=depth_scale,
+                                      **options)
+    if method.endswith("+") and method[:-1] in _REGISTRY:
+        base = method[:-1]
+        info = _REGISTRY[base]
+        own, rest = _split_options(method, info, options, tuple(ddm.module_defaults()))
+        if base in FUSED_PLUS:
+            fused = FUSED_PLUS[base](depth, K, depth_scale, own, rest)
+            if fused is not None:
+                return fused
         normals = info.func(depth, K, depth_scale=depth_scale, **own)
-        return refine(normals, depth, K, depth_scale=depth_scale, **rest)
+        return ddm.discontinuity_discrimination(normals, depth, K, depth_scale=depth_scale,
+                                                **rest)
     info = get_estimator(method)
     own, _ = _split_options(method, info, options)
     return info.func(depth, K, depth_scale=depth_scale, **own)

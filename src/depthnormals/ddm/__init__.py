@@ -5,18 +5,29 @@
 ``depth_curvature`` and ``kendall_map`` expose the two discriminators.
 """
 
-from ._module import NEIGHBOURHOODS, discontinuity_discrimination, fused_plus, module_defaults
+from ._module import (
+    NEIGHBOURHOODS,
+    RENAMED,
+    ModuleOptions,
+    discontinuity_discrimination,
+    module_defaults,
+    renamed_option_error,
+)
 from .correlation import CORRELATIONS, kendall_map
 from .curvature import CURVATURES, DERIVATIVES, depth_curvature
+from .threefn_plus import fused_plus
 
 __all__ = [
     "CORRELATIONS",
     "CURVATURES",
     "DERIVATIVES",
     "NEIGHBOURHOODS",
+    "RENAMED",
+    "ModuleOptions",
     "depth_curvature",
     "discontinuity_discrimination",
     "fused_plus",
     "kendall_map",
     "module_defaults",
+    "renamed_option_error",
 ]

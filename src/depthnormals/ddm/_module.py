@@ -2,28 +2,64 @@
 
 from __future__ import annotations
 
-import functools
-import inspect
+import dataclasses
 import numbers
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from .._validate import check_choice, check_normals
-from ..estimators._common import prepare, row_dtype
+from ..kernels.depth import prepare, row_dtype
 from .correlation import CORRELATIONS, kendall_map
-from .crf import CROSS, SQUARE, crf_step, select_min
+from .crf import crf_step
 from .curvature import CURVATURES, DERIVATIVES, FOOTPRINTS, SLOPES, curvature_map
-from .fused import fused_3f2n_plus
 from .planefit import plane_fit_select
+from .selection import CROSS, SQUARE, select_min
 
-__all__ = ["NEIGHBOURHOODS", "discontinuity_discrimination", "fused_plus", "module_defaults"]
+__all__ = ["NEIGHBOURHOODS", "RENAMED", "ModuleOptions", "discontinuity_discrimination",
+           "module_defaults", "renamed_option_error"]
 
 NEIGHBOURHOODS = ("square", "cross")
 _CURV = (*CURVATURES, "none")
 
 
 SELECTIONS = ("curvature", "plane-fit")
+
+#: Module options renamed so that no "+" form has two options of one name: old -> new.
+RENAMED = {"iterations": "crf_iterations"}
+
+
+@dataclass(frozen=True)
+class ModuleOptions:
+    """The options of the discontinuity discrimination module, validated on construction.
+
+    The fields and their meaning are those of :func:`discontinuity_discrimination`'s
+    parameters (same names, same defaults).
+    """
+
+    curvature: str = "mean"
+    correlation: str = "none"
+    crf: bool = False
+    sigma: float = 1.0
+    lambda_: float = 0.01
+    crf_iterations: int = 1
+    neighbourhood: str | None = None
+    derivatives: str = "inverse-depth"
+    slope: str = "min"
+    footprint: str = "pixel"
+    selection: str = "curvature"
+    fit_radius: int = 2
+    self_weight: float = 0.8
+    consistency: float | None = 0.1
+
+    def __post_init__(self) -> None:
+        self.normalised()
+
+    def normalised(self) -> dict[str, Any]:
+        """The options checked and normalised, as the kernels take them (``lam``,
+        ``iterations``, floats)."""
+        return _options(**{f.name: getattr(self, f.name) for f in dataclasses.fields(self)})
 
 
 def _empty(shape: tuple[int, ...]) -> np.ndarray:
@@ -39,16 +75,14 @@ def _check_real(value: Any, name: str, *, minimum: float = 0.0) -> float:
     return value
 
 
-def discontinuity_discrimination(
-    normals: Any, depth: Any, K: Any, *, curvature: str = "mean",
-    correlation: str = "none", crf: bool = False, sigma: float = 1.0,
-    lambda_: float = 0.01, iterations: int = 1, neighbourhood: str | None = None,
-    derivatives: str = "inverse-depth", slope: str = "min", footprint: str = "pixel",
-    selection: str = "curvature", fit_radius: int = 2, self_weight: float = 0.8,
-    consistency: float | None = 0.1, depth_scale: float | None = None,
-) -> np.ndarray:
+def discontinuity_discrimination(normals: Any, depth: Any, K: Any, *,
+                                 options: ModuleOptions | None = None,
+                                 depth_scale: float | None = None,
+                                 **module_options: Any) -> np.ndarray:
     """Refine any estimator's normals near discontinuities: the DDM of 3F2N+.
 
+    The options are the fields of :class:`ModuleOptions`, given either as ``options=`` or as
+    keywords (``correlation="kendall", crf=True``), never both; unknown names raise TypeError.
     Three stages, each optional:
 
     1. **Curvature selection** (section III-A): every pixel takes the normal of the candidate
@@ -63,7 +97,7 @@ def discontinuity_discrimination(
        (the paper's ``exp(sigma f + sum lambda g)`` read as an energy to minimise; with
        Kendall, ``s_i = 1 - tau_i`` is literally the paper's ``1 - tau``) is minimised per
        pixel over the candidate normals of the neighbourhood, ``n_q`` being the output of
-       stage 1. ``iterations > 1`` repeats it synchronously (ICM-like), the anchor staying
+       stage 1. ``crf_iterations > 1`` repeats it synchronously (ICM-like), the anchor staying
        the stage-1 normal.
 
     Parameters
@@ -76,6 +110,8 @@ def discontinuity_discrimination(
         candidate.
     K : Intrinsics, array (3, 3) or (fx, fy, cx, cy)
         Intrinsics in pixels, 0-based pixel centres.
+    options : ModuleOptions, optional
+        All the options below in one frozen value (default: ``ModuleOptions()``).
     curvature : {"mean", "max", "normal", "gauss", "pixel-mean", "none"}, default "mean"
         Depth curvature (:func:`depthnormals.ddm.depth_curvature`). ``"pixel-mean"`` with
         ``self_weight=1.0, consistency=None`` and no correlation reproduces the authors'
@@ -96,8 +132,10 @@ def discontinuity_discrimination(
         matters. ``k_q`` enters as ``k_q z_q`` (dimensionless) for ``"mean"`` and ``"max"``,
         and as is for the other kinds. The default lambda was chosen by measurement
         (``docs/3f2n-plus.md``).
-    iterations : int, default 1
-        CRF passes (1 = the per-pixel minimisation the paper's runtimes suggest).
+    crf_iterations : int, default 1
+        CRF passes (1 = the per-pixel minimisation the paper's runtimes suggest). Spelled
+        ``iterations`` before 0.2; that name now raises TypeError (``sda-sne+`` has an
+        ``iterations`` of its own).
     neighbourhood : {"square", "cross"}, optional
         Candidates: the 3x3 square (the paper's P+) or self + 4-neighbours (the public
         code). Default ``"cross"`` (measured better: diagonal copies shift the normal by
@@ -180,11 +218,7 @@ def discontinuity_discrimination(
     >>> bool(e1 < e0)
     True
     """
-    opts = _options(curvature=curvature, correlation=correlation, crf=crf, sigma=sigma,
-                    lambda_=lambda_, iterations=iterations, neighbourhood=neighbourhood,
-                    derivatives=derivatives, slope=slope, footprint=footprint,
-                    selection=selection, fit_radius=fit_radius, self_weight=self_weight,
-                    consistency=consistency)
+    opts = _module_options(options, module_options).normalised()
     z, cam = prepare(depth, K, depth_scale)
     z = row_dtype(z, cam.fx, cam.fy, cam.cx, cam.cy)
     n_in = check_normals(normals, shape=z.shape)
@@ -196,7 +230,7 @@ _SIM_MODES = {"none": 0, "kendall": 1, "kendall-prose": 2, "pearson": 3}  # crf_
 
 
 def _options(*, curvature: str, correlation: str, crf: bool, sigma: float, lambda_: float,
-             iterations: int, neighbourhood: str | None, derivatives: str, slope: str,
+             crf_iterations: int, neighbourhood: str | None, derivatives: str, slope: str,
              footprint: str, selection: str, fit_radius: int, self_weight: float,
              consistency: float | None) -> dict[str, Any]:
     """Validate the module's options; return them normalised."""
@@ -209,10 +243,10 @@ def _options(*, curvature: str, correlation: str, crf: bool, sigma: float, lambd
         raise TypeError(f"crf must be True or False; got {crf!r}")
     sigma = _check_real(sigma, "sigma")
     lam = _check_real(lambda_, "lambda_")
-    if isinstance(iterations, bool) or not isinstance(iterations, numbers.Integral):
-        raise TypeError(f"iterations must be an integer >= 1; got {iterations!r}")
-    if iterations < 1:
-        raise ValueError(f"iterations must be >= 1; got {iterations}")
+    if isinstance(crf_iterations, bool) or not isinstance(crf_iterations, numbers.Integral):
+        raise TypeError(f"crf_iterations must be an integer >= 1; got {crf_iterations!r}")
+    if crf_iterations < 1:
+        raise ValueError(f"crf_iterations must be >= 1; got {crf_iterations}")
     if neighbourhood is None:
         neighbourhood = "cross"
     check_choice(neighbourhood, "neighbourhood", NEIGHBOURHOODS)
@@ -230,7 +264,7 @@ def _options(*, curvature: str, correlation: str, crf: bool, sigma: float, lambd
     if consistency is not None:
         consistency = _check_real(consistency, "consistency")
     return {"curvature": curvature, "correlation": correlation, "crf": bool(crf),
-            "sigma": sigma, "lam": lam, "iterations": int(iterations),
+            "sigma": sigma, "lam": lam, "iterations": int(crf_iterations),
             "neighbourhood": neighbourhood, "derivatives": derivatives, "slope": slope,
             "footprint": footprint, "selection": selection, "fit_radius": int(fit_radius),
             "self_weight": sw, "consistency": consistency}
@@ -282,56 +316,36 @@ def _refine(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
     return cur
 
 
-@functools.cache
-def _defaults() -> tuple[tuple[str, Any], ...]:
-    return tuple((p.name, p.default) for p in
-                 inspect.signature(discontinuity_discrimination).parameters.values()
-                 if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name != "depth_scale")
-
-
 def module_defaults() -> dict[str, Any]:
-    """The options of :func:`discontinuity_discrimination` (but ``depth_scale``) and their
-    defaults (read once from its signature)."""
-    return dict(_defaults())
+    """The options of :func:`discontinuity_discrimination` (the fields of
+    :class:`ModuleOptions`) and their defaults."""
+    return {f.name: f.default for f in dataclasses.fields(ModuleOptions)}
 
 
-def _is_str(value: Any, *allowed: str) -> bool:
-    return isinstance(value, str) and value in allowed
+def renamed_option_error(name: str, where: str) -> TypeError | None:
+    """The TypeError for a module option spelled the old way (:data:`RENAMED`), else None."""
+    if name in RENAMED:
+        return TypeError(f"{where}: the module option {name!r} is now {RENAMED[name]!r} "
+                         f"(pass {RENAMED[name]}=...)")
+    return None
 
 
-def fused_plus(base: str, depth: Any, K: Any, depth_scale: float | None,
-               estimator_options: dict[str, Any],
-               module_options: dict[str, Any]) -> np.ndarray | None:
-    """``"<base>+"`` in one fused pass where one exists (3F2N with its FD kernel and the
-    metric mean or max curvature with the cross selection); None otherwise.
-
-    Same results as the estimator followed by :func:`discontinuity_discrimination`
-    (``tests/test_ddm_fused.py``), about twice as fast: the 3F2N normals and the curvature
-    never leave the cache.
-    """
-    if base != "3f2n" or set(estimator_options) - {"kernel", "kernel_size", "aggregate"}:
-        return None
-    ks = estimator_options.get("kernel_size", 3)
-    agg = estimator_options.get("aggregate", "median")
-    if not (_is_str(estimator_options.get("kernel", "fd"), "fd") and type(ks) is int
-            and ks == 3 and _is_str(agg, "median", "mean")):
-        return None
-    o = _options(**{**module_defaults(), **module_options})
-    if not (o["curvature"] in ("mean", "max") and o["derivatives"] == "inverse-depth"
-            and o["slope"] == "min" and o["footprint"] == "pixel"
-            and o["selection"] == "curvature" and o["neighbourhood"] == "cross"):
-        return None
-    z, cam = prepare(depth, K, depth_scale)
-    z = row_dtype(z, cam.fx, cam.fy, cam.cx, cam.cy)
-    agg_mode = ("median", "mean").index(agg)
-    sim_mode = _SIM_MODES[o["correlation"]]
-    if o["crf"] and o["iterations"] == 1 and sim_mode != 3:  # the CRF in the same pass
-        out, _ = fused_3f2n_plus(z, cam.fx, cam.fy, cam.cx, cam.cy, mode=agg_mode,
-                                 use_max=o["curvature"] == "max", self_weight=o["self_weight"],
-                                 consistency=o["consistency"], crf=sim_mode, sigma=o["sigma"],
-                                 lam=o["lam"])
-        return out
-    n0, k = fused_3f2n_plus(z, cam.fx, cam.fy, cam.cx, cam.cy, mode=agg_mode,
-                            use_max=o["curvature"] == "max", self_weight=o["self_weight"],
-                            consistency=o["consistency"], want_curvature=o["crf"])
-    return _refine(z, cam.fx, cam.fy, cam.cx, cam.cy, None, n0, k, o)
+def _module_options(options: ModuleOptions | None, given: dict[str, Any]) -> ModuleOptions:
+    """``options`` or the keywords ``given``, as one validated :class:`ModuleOptions`."""
+    if options is not None:
+        if given:
+            raise TypeError("pass the module options either as options=ModuleOptions(...) or as "
+                            f"keywords, not both; got options= and {sorted(given)}")
+        if not isinstance(options, ModuleOptions):
+            raise TypeError(f"options must be a ModuleOptions; got {type(options).__name__}")
+        return options
+    valid = module_defaults()
+    for name in given:
+        err = renamed_option_error(name, "discontinuity_discrimination")
+        if err is not None:
+            raise err
+    unknown = sorted(set(given) - set(valid))
+    if unknown:
+        raise TypeError(f"discontinuity_discrimination got unknown option(s) {unknown}; valid "
+                        f"options: {', '.join(sorted(valid))}")
+    return ModuleOptions(**given)

@@ -1,7 +1,7 @@
 """The 3F2N+ CRF over the cross candidates, one row at a time from ring buffers.
 
 Used by the generic :func:`depthnormals.ddm.crf.crf_step` (cross candidates, Kendall or no
-correlation) and by the fused 3F2N+ pipeline (:mod:`depthnormals.ddm.fused`), which calls
+correlation) and by the fused 3F2N+ pipeline (:mod:`depthnormals.ddm.threefn_plus`), which calls
 the same row functions on rows it has just selected, so both give identical results.
 
 Rings hold padded planar rows (column ``u`` at index ``u + 1``; the padding and the slot of
@@ -30,7 +30,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ..estimators._common import store_normal
+from ..kernels.orient import store_normal
 
 __all__ = ["crf_flush", "crf_ring_row", "ring_slots", "scratch", "sim_coefficients",
            "similarity_ring_row", "similarity_row"]
@@ -38,7 +38,20 @@ __all__ = ["crf_flush", "crf_ring_row", "ring_slots", "scratch", "sim_coefficien
 _BIG = 1e6  # k_q is clamped to it (inf and NaN too): a valid pixel always has a finite energy
 _CHUNK = 64  # hard pixels per batch; scratch rows of _CHUNK + 4 floats (no 4K aliasing)
 _DCOL = (-1, 0, 1, -1, 1, -1, 0, 1)  # column offsets of the 8 neighbours, raster order
-_CANDS = (8, 1, 3, 4, 6)  # candidates in the public code's order: self (8), up, left, right, down
+_CANDS = (8, 1, 3, 4, 6)  # candidates in the public code's order: self (SELF), up, left, right, down
+#: Rows of the scratch ``g`` (:func:`scratch`), one column per pending pixel. Blocks of 8 are
+#: the 8 neighbours in raster order (zeros where a neighbour is invalid).
+G_NX, G_NY, G_NZ = 0, 8, 16  # the neighbours' normals, x / y / z blocks
+G_WEIGHT = 24  # their similarity weights
+G_VALID = 32  # their validity (1 or 0)
+G_ANCHOR = 40  # 40-42: the anchor normal x, y, z
+G_LAM_K = 43  # lam k_q (k_q clamped to _BIG)
+G_OWN = 45  # 45-47: the pixel's own current normal x, y, z (zeros where invalid)
+G_OWN_VALID = 48  # its validity (1 or 0)
+G_ENERGY = 49  # 49-53: the five candidates' energies (order _CANDS)
+G_ROWS = 54
+#: Candidate index of the pixel itself in ``_CANDS`` (neighbours are 0..7).
+SELF = 8
 _INL = {"cache": True, "error_model": "numpy", "inline": "always"}
 _JIT = {"cache": True, "error_model": "numpy"}
 
@@ -52,12 +65,10 @@ def sim_coefficients(sim_mode: int) -> tuple[float, float]:
 def scratch(w):
     """The scratch arrays ``idx, g, pos`` of :func:`crf_ring_row` for rows of ``w`` pixels.
 
-    ``g`` rows, one column per pending pixel: 0-23 the 8 neighbours' normals (x, y, z blocks;
-    zeros where invalid), 24-31 their weights (0 where invalid), 32-39 their validity, 40-42
-    the anchor, 43 ``lam k_q``, 45-47 the pixel's own normal, 48 its validity, 49-53 the five
-    candidates' energies. ``pos``: (row, column) of each pending pixel.
+    ``g`` (:data:`G_ROWS`, ...): the rows named ``G_*`` above, one column per pending pixel.
+    ``pos``: (row, column) of each pending pixel.
     """
-    return (np.empty(w, dtype=np.int64), np.empty((54, _CHUNK + 4), dtype=np.float32),
+    return (np.empty(w, dtype=np.int64), np.empty((G_ROWS, _CHUNK + 4), dtype=np.float32),
             np.empty((2, _CHUNK), dtype=np.int64))
 
 
@@ -117,7 +128,7 @@ def _norm3(a, b, c):
 
 @nb.njit(**_INL)
 def _dist(g, n, j, qx, qy, qz):
-    return g[24 + n, j] * _norm3(g[n, j] - qx, g[8 + n, j] - qy, g[16 + n, j] - qz)
+    return g[G_WEIGHT + n, j] * _norm3(g[G_NX + n, j] - qx, g[G_NY + n, j] - qy, g[G_NZ + n, j] - qz)
 
 
 @nb.njit(**_INL)
@@ -125,10 +136,10 @@ def _energies(g, c, nh, sigma, e_out):
     """Energy of candidate ``c`` (a neighbour index; 8: the pixel itself) at every hard
     pixel, vectorised over them; +inf where the candidate is invalid. The edge sum runs over
     the neighbours in raster order, as the energy's definition."""
-    gx = g[c] if c < 8 else g[45]
-    gy = g[8 + c] if c < 8 else g[46]
-    gz = g[16 + c] if c < 8 else g[47]
-    gok = g[32 + c] if c < 8 else g[48]
+    gx = g[G_NX + c] if c < SELF else g[G_OWN]
+    gy = g[G_NY + c] if c < SELF else g[G_OWN + 1]
+    gz = g[G_NZ + c] if c < SELF else g[G_OWN + 2]
+    gok = g[G_VALID + c] if c < SELF else g[G_OWN_VALID]
     inf = np.float32(np.inf)
     zero = np.float32(0.0)
     sigma = np.float32(sigma)
@@ -136,8 +147,8 @@ def _energies(g, c, nh, sigma, e_out):
         qx = gx[j]
         qy = gy[j]
         qz = gz[j]
-        ax = g[40, j]
-        e = sigma * _norm3(qx - ax, qy - g[41, j], qz - g[42, j])
+        ax = g[G_ANCHOR, j]
+        e = sigma * _norm3(qx - ax, qy - g[G_ANCHOR + 1, j], qz - g[G_ANCHOR + 2, j])
         e = e if ax == ax else zero
         acc = _dist(g, 0, j, qx, qy, qz)
         acc += _dist(g, 1, j, qx, qy, qz)
@@ -147,27 +158,32 @@ def _energies(g, c, nh, sigma, e_out):
         acc += _dist(g, 5, j, qx, qy, qz)
         acc += _dist(g, 6, j, qx, qy, qz)
         acc += _dist(g, 7, j, qx, qy, qz)
-        e += g[43, j] * acc
+        e += g[G_LAM_K, j] * acc
         e_out[j] = e if gok[j] > zero else inf
 
 
 @nb.njit(**_JIT)
-def crf_ring_row(q, a, m, s, z, kq, sel, sim, hsum, anc, anchored, sigma, lam, idx, g, pos,
-                 pend, fx, fy, cx, cy, out):
-    """One CRF row ``q`` into ``out[q]`` from the ring slots ``a, m, s`` of rows q - 1, q and
-    q + 1 (:func:`ring_slots`); returns the number of pixels pending in ``g``.
+def crf_ring_row(q, slots, z, kq, ring, anc, anchored, weights, work, pend, cam, out):
+    """One CRF row ``q`` into ``out[q]`` from the ring slots ``slots = (a, m, s)`` of rows
+    q - 1, q and q + 1 (:func:`ring_slots`) of ``ring = (sel, sim, hsum)`` (the module
+    docstring gives their layout); returns the number of pixels pending in ``work``.
 
     ``z`` (H, W): the depth (NaN invalid; the normals in ``sel`` are NaN there too); ``kq``
     (W) float64: row q's ``k_q`` as the energy uses it (NaN or inf: clamped to 1e6); ``anc``
     (3, W + 2) float32: row q's anchors; ``anchored``: the current normals are the anchors
-    (skips the comparison). ``idx, g, pos``: :func:`scratch`; ``pend``: the pixels pending
-    in it (0 at the start of a band; :func:`crf_flush` after its last row).
+    (skips the comparison). ``weights = (sigma, lam)``; ``work = (idx, g, pos)``:
+    :func:`scratch`; ``pend``: the pixels pending in it (0 at the start of a band;
+    :func:`crf_flush` after its last row). ``cam``: :class:`depthnormals.kernels.depth.Pinhole`.
 
     The pixels the shortcut cannot settle are compacted into a list and their neighbours
     gathered into ``g``; every ``_CHUNK`` of them (across rows) the five candidates' energies
     are computed as vectors over the batch, so the per-pixel work has no data-dependent
     branches and the vector loops run full.
     """
+    a, m, s = slots
+    sel, sim, hsum = ring
+    sigma, lam = weights
+    idx, g, pos = work
     w = kq.size
     zrow = z[q]
     hp = hsum[a]
@@ -214,43 +230,46 @@ def crf_ring_row(q, a, m, s, z, kq, sel, sim, hsum, anc, anchored, sigma, lam, i
             col = i + _DCOL[n]
             x = sel[sl, 0, col]
             ok = x == x  # an invalid one: zero normal and weight, its term is +0 in every sum
-            g[n, j] = x if ok else zero
-            g[8 + n, j] = sel[sl, 1, col] if ok else zero
-            g[16 + n, j] = sel[sl, 2, col] if ok else zero
-            g[24 + n, j] = sim[sl, col] if ok else zero
-            g[32 + n, j] = one if ok else zero
-        g[40, j] = anc[0, i]
-        g[41, j] = anc[1, i]
-        g[42, j] = anc[2, i]
+            g[G_NX + n, j] = x if ok else zero
+            g[G_NY + n, j] = sel[sl, 1, col] if ok else zero
+            g[G_NZ + n, j] = sel[sl, 2, col] if ok else zero
+            g[G_WEIGHT + n, j] = sim[sl, col] if ok else zero
+            g[G_VALID + n, j] = one if ok else zero
+        g[G_ANCHOR, j] = anc[0, i]
+        g[G_ANCHOR + 1, j] = anc[1, i]
+        g[G_ANCHOR + 2, j] = anc[2, i]
         k = kq[u]
-        g[43, j] = lam * (k if k < _BIG else _BIG)
+        g[G_LAM_K, j] = lam * (k if k < _BIG else _BIG)
         x = x0[i]
         ok = x == x
-        g[45, j] = x if ok else zero
-        g[46, j] = y0[i] if ok else zero
-        g[47, j] = t0[i] if ok else zero
-        g[48, j] = one if ok else zero
+        g[G_OWN, j] = x if ok else zero
+        g[G_OWN + 1, j] = y0[i] if ok else zero
+        g[G_OWN + 2, j] = t0[i] if ok else zero
+        g[G_OWN_VALID, j] = one if ok else zero
         pos[0, j] = q
         pos[1, j] = u
         pend += 1
         if pend == _CHUNK:
-            crf_flush(z, g, pos, pend, sigma, fx, fy, cx, cy, out)
+            crf_flush(z, work, pend, sigma, cam, out)
             pend = 0
     return pend
 
 
 @nb.njit(**_JIT)
-def crf_flush(z, g, pos, nh, sigma, fx, fy, cx, cy, out):
-    """Minimise the energy at the ``nh`` pixels pending in ``g`` (at ``pos``) and store the
-    winners that are not the pixel's own normal (which ``out`` holds already)."""
+def crf_flush(z, work, nh, sigma, cam, out):
+    """Minimise the energy at the ``nh`` pixels pending in ``work = (idx, g, pos)`` (at
+    ``pos``) and store into ``out`` the winners that are not the pixel's own normal (which
+    ``out`` holds already)."""
+    _, g, pos = work
+    fx, fy, cx, cy = cam
     if nh == 0:
         return
     # one call per candidate, each with a constant index (its rows fold at compile time)
-    _energies(g, _CANDS[0], nh, sigma, g[49])
-    _energies(g, _CANDS[1], nh, sigma, g[50])
-    _energies(g, _CANDS[2], nh, sigma, g[51])
-    _energies(g, _CANDS[3], nh, sigma, g[52])
-    _energies(g, _CANDS[4], nh, sigma, g[53])
+    _energies(g, _CANDS[0], nh, sigma, g[G_ENERGY])
+    _energies(g, _CANDS[1], nh, sigma, g[G_ENERGY + 1])
+    _energies(g, _CANDS[2], nh, sigma, g[G_ENERGY + 2])
+    _energies(g, _CANDS[3], nh, sigma, g[G_ENERGY + 3])
+    _energies(g, _CANDS[4], nh, sigma, g[G_ENERGY + 4])
     nan = np.float32(np.nan)
     zero = np.float32(0.0)
     for j in range(nh):
@@ -258,15 +277,15 @@ def crf_flush(z, g, pos, nh, sigma, fx, fy, cx, cy, out):
         u = pos[1, j]
         wsum = zero
         for n in range(8):
-            wsum += g[24 + n, j]
-        ax = g[40, j]
-        if ((ax == ax) & (g[45, j] == ax) & (g[46, j] == g[41, j]) & (g[47, j] == g[42, j])
-                & (sigma >= g[43, j] * wsum)):
+            wsum += g[G_WEIGHT + n, j]
+        ax = g[G_ANCHOR, j]
+        if ((ax == ax) & (g[G_OWN, j] == ax) & (g[G_OWN + 1, j] == g[G_ANCHOR + 1, j])
+                & (g[G_OWN + 2, j] == g[G_ANCHOR + 2, j]) & (sigma >= g[G_LAM_K, j] * wsum)):
             continue  # the anchor, exactly (out[q, u] holds it)
         best = np.inf
         c = -1
         for n in range(5):  # the first of equal energies wins
-            e = g[49 + n, j]
+            e = g[G_ENERGY + n, j]
             if e < best:
                 best = e
                 c = n
@@ -279,5 +298,5 @@ def crf_flush(z, g, pos, nh, sigma, fx, fy, cx, cy, out):
             continue
         nbr = _CANDS[c]
         zq = z[q, u]
-        store_normal(out, q, u, np.float64(g[nbr, j]), np.float64(g[8 + nbr, j]),
-                     np.float64(g[16 + nbr, j]), (u - cx) * zq / fx, (q - cy) * zq / fy, zq)
+        store_normal(out, q, u, np.float64(g[G_NX + nbr, j]), np.float64(g[G_NY + nbr, j]),
+                     np.float64(g[G_NZ + nbr, j]), (u - cx) * zq / fx, (q - cy) * zq / fy, zq)

@@ -59,7 +59,7 @@ import numpy as np
 
 from .._parallel import run_rows
 from .._validate import check_choice
-from ..estimators._common import prepare, row_arrays, row_dtype
+from ..kernels.depth import prepare, row_arrays, row_dtype
 
 __all__ = ["CURVATURES", "DERIVATIVES", "FOOTPRINTS", "SLOPES", "depth_curvature"]
 
@@ -183,6 +183,10 @@ def _pixel_value(z0, zl, zr, zt, zb, a_off, b_off, fx, fy, kind, inverse, minslo
     return 0.25 * (a + b + c + d)
 
 
+#: Slots of the constants row of :func:`row_constants` (in the dtype of the row pass).
+K_HALF, K_ONE, K_INF, K_ZERO, K_TWO, K_QUARTER, K_R2, K_FX, K_FY = range(9)
+
+
 def row_constants(dtype: np.dtype, fx: float, fy: float) -> np.ndarray:
     """Constants of :func:`mean_max_row` in the dtype the row pass runs in."""
     return np.array([0.5, 1.0, np.inf, 0.0, 2.0, 0.25, _R2, fx, fy], dtype=dtype)
@@ -198,15 +202,15 @@ def mean_max_row(zp, zc, zn, Rp, Rc, Rn, acol, b_off, k, use_max, inverse, minsl
     inverse-depth numerator written ``z^2 ((z - z_l) / z_l + (z - z_r) / z_r)``, which has no
     cancellation of large terms (float32 keeps it accurate).
     """
-    half = k[0]
-    one = k[1]
-    inf = k[2]
-    zero = k[3]
-    two = k[4]
-    quarter = k[5]
-    r2 = k[6]
-    fx = k[7]
-    fy = k[8]
+    half = k[K_HALF]
+    one = k[K_ONE]
+    inf = k[K_INF]
+    zero = k[K_ZERO]
+    two = k[K_TWO]
+    quarter = k[K_QUARTER]
+    r2 = k[K_R2]
+    fx = k[K_FX]
+    fy = k[K_FY]
     fx2 = fx * fx
     fy2 = fy * fy
     w = zc.size
@@ -297,7 +301,7 @@ def _curvature_rows(v0, v1, z, fx, fy, cx, cy, kind, inverse, minslope, k, acol,
     h, w = z.shape
     R = np.empty((3, w), dtype=z.dtype)  # rolling 1 / z of rows v-1, v, v+1 (slot = row % 3)
     row = np.empty(w, dtype=z.dtype)
-    one = k[1]
+    one = k[K_ONE]
     if kind <= 1:
         for r in range(max(v0 - 1, 0), min(v0 + 1, h)):
             for u in range(w):
@@ -387,7 +391,7 @@ def curvature_map(z: np.ndarray, fx: float, fy: float, cx: float, cy: float, kin
                   derivatives: str = "inverse-depth", slope: str = "min",
                   footprint: str = "pixel") -> np.ndarray:
     """Curvature map of prepared depth ``z`` (NaN at invalid pixels, as
-    :func:`depthnormals.estimators._common.row_dtype` gives it); see the module notes."""
+    :func:`depthnormals.kernels.depth.row_dtype` gives it); see the module notes."""
     h, w = z.shape
     out = np.empty((h, w), dtype=np.float64)
     inverse = derivatives == "inverse-depth"

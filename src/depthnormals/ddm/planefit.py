@@ -18,7 +18,7 @@ import numba as nb
 import numpy as np
 
 from .._parallel import run_rows
-from ..estimators._common import store_normal
+from ..kernels.orient import store_normal
 
 __all__ = ["plane_fit_select"]
 

@@ -1,8 +1,14 @@
-"""The estimators. Importing this package registers every one of them."""
+"""The estimators: one public function each (the registry lists them by name)."""
 
 from .cross_product import cross_product
 from .d2nt import d2nt
-from .pcl import pcl_integral_image
+from .pcl import (
+    pcl_average_3d_gradient,
+    pcl_average_depth_change,
+    pcl_covariance_matrix,
+    pcl_integral_image,
+    pcl_simple_3d_gradient,
+)
 from .pointcloud import angle_weighted, area_weighted, plane_pca, plane_svd, vector_svd
 from .range_image import fals, line_mod, sri
 from .roadseg import sne_roadseg
@@ -16,7 +22,11 @@ __all__ = [
     "d2nt",
     "fals",
     "line_mod",
+    "pcl_average_3d_gradient",
+    "pcl_average_depth_change",
+    "pcl_covariance_matrix",
     "pcl_integral_image",
+    "pcl_simple_3d_gradient",
     "plane_pca",
     "plane_svd",
     "sda_sne",

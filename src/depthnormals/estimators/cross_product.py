@@ -10,8 +10,8 @@ import numpy as np
 
 from .._parallel import run_rows
 from .._validate import check_choice
-from ..registry import register
-from ._common import prepare, store_normal
+from ..kernels.depth import prepare
+from ..kernels.orient import store_normal
 
 __all__ = ["DIFFERENCES", "cross_product"]
 
@@ -53,7 +53,6 @@ def _cross_rows(v0, v1, z, fx, fy, cx, cy, central, out):
                          (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
 
 
-@register("cross-product")
 def cross_product(depth: Any, K: Any, *, difference: str = "central",
                   depth_scale: float | None = None) -> np.ndarray:
     """The plain cross-product normal map: one 3-D difference per image axis, crossed.

@@ -10,9 +10,9 @@ import numpy as np
 
 from .._parallel import run_rows
 from .._validate import check_choice
-from ..registry import register
-from ._common import prepare, store_normal
-from ._stencils import sample_or_nan
+from ..kernels.depth import prepare
+from ..kernels.orient import store_normal
+from ..kernels.stencils import sample_or_nan
 
 __all__ = ["VARIANTS", "d2nt", "neighbour_copy_refinement"]
 
@@ -257,7 +257,6 @@ def neighbour_copy_refinement(normals: np.ndarray, z: np.ndarray, fx: float, fy:
     return out
 
 
-@register("d2nt", scale_invariant=False)
 def d2nt(depth: Any, K: Any, *, variant: str = "mnr", depth_scale: float | None = None) -> np.ndarray:
     """Depth-to-normal translator (D2NT): normals in closed form from depth derivatives.
 

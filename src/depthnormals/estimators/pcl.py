@@ -32,9 +32,9 @@ import numpy as np
 
 from .._parallel import run_rows
 from .._validate import check_choice
-from ..registry import register
-from ._common import prepare, store_normal
-from ._eig3 import smallest_eigenvector
+from ..kernels.depth import prepare
+from ..kernels.eig3 import smallest_eigenvector
+from ..kernels.orient import store_normal
 
 __all__ = [
     "BORDER_POLICIES",
@@ -622,7 +622,7 @@ def _fixed_mode(mode: str, name: str):
         f"PCL's integral-image normals, {mode.upper().replace('-', '_')} mode "
         f"(:func:`pcl_integral_image` with ``mode={mode!r}``).\n\n"
         "Abstains (NaN) next to depth jumps; see :func:`pcl_integral_image` for the options.\n")
-    return register(name, scale_invariant=False)(estimator)
+    return estimator
 
 
 # the four modes as registered estimators (metric thresholds: not scale invariant)

@@ -11,9 +11,9 @@ import numba as nb
 import numpy as np
 
 from .._parallel import run_rows
-from ..registry import register
-from ._common import prepare, store_normal
-from ._eig3 import smallest_eigenvector, smallest_eigenvector_newton
+from ..kernels.depth import prepare
+from ..kernels.eig3 import smallest_eigenvector, smallest_eigenvector_newton
+from ..kernels.orient import store_normal
 
 __all__ = ["angle_weighted", "area_weighted", "plane_pca", "plane_svd", "vector_svd"]
 
@@ -387,7 +387,6 @@ def _fan(depth, K, depth_scale, angle):
     return out
 
 
-@register("plane-svd")
 def plane_svd(depth: Any, K: Any, *, window: int = 3,
               depth_scale: float | None = None) -> np.ndarray:
     """PlaneSVD: the least-squares plane through the back-projected window, by SVD.
@@ -428,7 +427,6 @@ def plane_svd(depth: Any, K: Any, *, window: int = 3,
     return _scatter(depth, K, window, depth_scale, True)
 
 
-@register("plane-pca")
 def plane_pca(depth: Any, K: Any, *, window: int = 3,
               depth_scale: float | None = None) -> np.ndarray:
     """PlanePCA: the normal is the least principal axis of the back-projected window.
@@ -465,7 +463,6 @@ def plane_pca(depth: Any, K: Any, *, window: int = 3,
     return _scatter(depth, K, window, depth_scale, True)
 
 
-@register("vector-svd")
 def vector_svd(depth: Any, K: Any, *, window: int = 3,
                depth_scale: float | None = None) -> np.ndarray:
     """VectorSVD: the direction most orthogonal to the difference vectors p_i - q.
@@ -502,7 +499,6 @@ def vector_svd(depth: Any, K: Any, *, window: int = 3,
     return _scatter(depth, K, window, depth_scale, False)
 
 
-@register("area-weighted")
 def area_weighted(depth: Any, K: Any, *, depth_scale: float | None = None) -> np.ndarray:
     """AreaWeighted: the area-weighted mean of the normals of the 8 triangles around q.
 
@@ -536,7 +532,6 @@ def area_weighted(depth: Any, K: Any, *, depth_scale: float | None = None) -> np
     return _fan(depth, K, depth_scale, False)
 
 
-@register("angle-weighted")
 def angle_weighted(depth: Any, K: Any, *, depth_scale: float | None = None) -> np.ndarray:
     """AngleWeighted: the angle-weighted mean of the normals of the 8 triangles around q.
 

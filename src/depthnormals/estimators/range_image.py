@@ -10,9 +10,9 @@ import numpy as np
 
 from .._parallel import run_rows
 from .._validate import check_positive
-from ..registry import register
-from ._common import new_output, prepare, store_normal
-from ._stencils import gradient_kernels, stencil_derivative
+from ..kernels.depth import new_output, prepare
+from ..kernels.orient import store_normal
+from ..kernels.stencils import gradient_kernels, stencil_derivative
 from .pointcloud import check_window
 
 __all__ = ["fals", "line_mod", "sri"]
@@ -310,7 +310,6 @@ def _fals_rows(v0, v1, z, fx, fy, cx, cy, r, out):
                 _fals_pixel(z, v, u, fx, fy, cx, cy, r, out)
 
 
-@register("fals")
 def fals(depth: Any, K: Any, *, window: int = 5, depth_scale: float | None = None) -> np.ndarray:
     """Fast approximate least squares (FALS): a plane fit in the range image.
 
@@ -440,10 +439,18 @@ def _sri_hrow(Rr, deriv, md, hd):
 
 
 @nb.njit(cache=True, error_model=_NUMPY)
-def _sri_fast_row(v, R, hd, deriv, smooth, iws, fx, fy, cx, cy, vd, ru_, rv_, bx_, by_, bz_,
-                  flag_):
+def _sri_fast_row(v, R, hd, deriv, smooth, iws, cam, work, out_row, out_flag):
     """Separable Sobel derivatives and the SRI normal over the interior of row v (views
-    starting at 0, so the loops vectorise); a NaN in the window gives NaN and a flag."""
+    starting at 0, so the loops vectorise); a NaN in the window gives NaN and a flag.
+
+    ``cam = (fx, fy, cx, cy)``; ``work = (vd, ru, rv)``: scratch rows (W); writes the normals
+    into ``out_row = (bx, by, bz)`` and ``out_flag`` (W, True where the per-pixel path
+    :func:`_sri_pixel` must redo the pixel).
+    """
+    fx, fy, cx, cy = cam
+    vd, ru_, rv_ = work
+    bx_, by_, bz_ = out_row
+    flag_ = out_flag
     w = R.shape[1]
     m = deriv.size // 2
     n = 2 * m + 1
@@ -526,15 +533,14 @@ def _sri_rows(v0, v1, z, R, fx, fy, cx, cy, deriv, smooth, out):
             for rr in range(max(nxt, v - m), v + m + 1):
                 _sri_hrow(R[rr], deriv, m, hd[rr % n])
             nxt = v + m + 1
-            _sri_fast_row(v, R, hd, deriv, smooth, iws, fx, fy, cx, cy, vd, ru, rv, bx, by, bz,
-                          flag)
+            _sri_fast_row(v, R, hd, deriv, smooth, iws, (fx, fy, cx, cy), (vd, ru, rv),
+                          (bx, by, bz), flag)
             _copy_row(out[v, m:w - m], bx[m:w - m], by[m:w - m], bz[m:w - m])
         for u in range(w):
             if flag[u]:
                 _sri_pixel(z, R, v, u, fx, fy, cx, cy, deriv, smooth, out)
 
 
-@register("sri")
 def sri(depth: Any, K: Any, *, window: int = 5, depth_scale: float | None = None) -> np.ndarray:
     """Spherical range image (SRI): normals from derivatives of range in azimuth/elevation.
 
@@ -644,7 +650,6 @@ def _linemod_rows(v0, v1, z, fx, fy, cx, cy, r, thr, out):
                          (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
 
 
-@register("line-mod", scale_invariant=False)
 def line_mod(depth: Any, K: Any, *, window: int = 11, threshold: float = 0.05,
              depth_scale: float | None = None) -> np.ndarray:
     """LINE-MOD's depth normals: a least-squares depth gradient from thresholded neighbours.

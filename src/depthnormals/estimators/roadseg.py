@@ -9,9 +9,10 @@ import numba as nb
 import numpy as np
 
 from .._parallel import run_rows
-from ..registry import register
-from ._common import NEIGHBOURS8, nz_candidates, prepare, store_normal
-from ._stencils import gradient_kernels, stencil_derivative
+from ..kernels.depth import prepare
+from ..kernels.orient import store_normal
+from ..kernels.stencils import gradient_kernels, stencil_derivative
+from ..kernels.threefn_rows import NEIGHBOURS8, nz_candidates
 
 __all__ = ["sne_roadseg"]
 
@@ -138,7 +139,6 @@ def _roadseg_rows(v0, v1, z, D, fx, fy, cx, cy, deriv, smooth, nb_off, out):
                 _roadseg_pixel(z, D, v, u, fx, fy, cx, cy, deriv, smooth, nb_off, cand, out)
 
 
-@register("sne-roadseg")
 def sne_roadseg(depth: Any, K: Any, *, depth_scale: float | None = None) -> np.ndarray:
     """SNE-RoadSeg's estimator: inverse-depth gradients and a spherical mean of 8 candidates.
 

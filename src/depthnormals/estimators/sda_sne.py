@@ -10,8 +10,8 @@ import numba as nb
 import numpy as np
 
 from .._parallel import run_rows
-from ..registry import register
-from ._common import new_output, prepare, store_normal
+from ..kernels.depth import new_output, prepare
+from ..kernels.orient import store_normal
 
 __all__ = ["sda_sne"]
 
@@ -140,15 +140,24 @@ def _pick(best_g, best_e, best_s, g, e, s):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _iterate(v0, v1, zp, lu, lv, mu, mv, Gu, Gv, Eu, Ev, Su, Sv, Cu, Cv, step,
-             nGu, nGv, nEu, nEv, nSu, nSv, moved):
+def _iterate(v0, v1, zp, lap, state, costs, step, out_state, out_moved):
     """One synchronous round of the nine transitions, for both directions.
+
+    Reads the padded depth ``zp``, ``lap = (lu, lv, mu, mv)`` (:func:`_setup`), ``state =
+    (Gu, Gv, Eu, Ev, Su, Sv)`` (gradients, energies, stencil choices) and ``costs = (Cu, Cv)``
+    (:func:`_across_costs`); writes the next state into ``out_state`` (same layout) and the
+    number of pixels that changed per row into ``out_moved``.
 
     Candidate order of the public code (first minimum wins): 0 extend from the backward
     neighbour, 1 from the forward neighbour, 2 stay, 3/4 copy from the backward / forward
     neighbour across, 5..8 the diagonals (back-back, back-fwd, fwd-back, fwd-fwd: across
     first, then along) with a mixed-derivative correction.
     """
+    lu, lv, mu, mv = lap
+    Gu, Gv, Eu, Ev, Su, Sv = state
+    Cu, Cv = costs
+    nGu, nGv, nEu, nEv, nSu, nSv = out_state
+    moved = out_moved
     W = zp.shape[1]
     for v in range(v0 + _P, v1 + _P):
         m = 0
@@ -258,8 +267,8 @@ def sda_gradients(z: np.ndarray, iterations: int) -> tuple[np.ndarray, np.ndarra
     done = 0
     for it in range(1, iterations + 1):
         run_rows(_across_costs, shape[0], mu, mv, Eu, Ev, Cu, Cv)
-        run_rows(_iterate, h, zp, lu, lv, mu, mv, Gu, Gv, Eu, Ev, Su, Sv, Cu, Cv,
-                 1.0 / (it + 1.0), *nxt, moved)
+        run_rows(_iterate, h, zp, (lu, lv, mu, mv), (Gu, Gv, Eu, Ev, Su, Sv), (Cu, Cv),
+                 1.0 / (it + 1.0), tuple(nxt), moved)
         if not moved.any():
             break
         done = it
@@ -271,7 +280,6 @@ def sda_gradients(z: np.ndarray, iterations: int) -> tuple[np.ndarray, np.ndarra
             done)
 
 
-@register("sda-sne", scale_invariant=False)
 def sda_sne(depth: Any, K: Any, *, iterations: int = 3,
             depth_scale: float | None = None) -> np.ndarray:
     """Spatial discontinuity-aware SNE (SDA-SNE): DP-refined depth gradients, then D2NT.

@@ -208,9 +208,10 @@ def _run(Vc, F, cam, width, height, near, far, offsets, mask, margin):
     tiles_u = (width + _raster.TILE - 1) // _raster.TILE
     tiles_v = (height + _raster.TILE - 1) // _raster.TILE
     start, items = _raster.bin_faces(active, bbox, tiles_u, tiles_v)
-    depth, face = _raster.raster_tiles(normal, offset, edges, active, bbox, start, items,
-                                       tiles_u, tiles_v, cam.fx, cam.fy, cam.cx, cam.cy,
-                                       width, height, near, far, offsets, mask)
+    depth, face = _raster.raster_tiles((normal, offset, edges, active, bbox),
+                                       (start, items, tiles_u, tiles_v),
+                                       (cam.fx, cam.fy, cam.cx, cam.cy),
+                                       (width, height, near, far), offsets, mask)
     return depth, face, normal
 
 

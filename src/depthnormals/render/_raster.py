@@ -196,11 +196,19 @@ def bin_faces(nvert, bbox, tiles_u, tiles_v):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True)
-def raster_tiles(normal, offset, edges, nvert, bbox, start, items, tiles_u, tiles_v,
-                 fx, fy, cx, cy, width, height, near, far, offsets, mask):  # pragma: no cover
+def raster_tiles(faces, bins, cam, image, offsets, mask):  # pragma: no cover
     """Z-buffer every tile at the sample positions ``(u, v) + offsets[s]`` of the pixels where
     ``mask`` is True. Returns depth (H, W, S) (0 = no surface, NaN = not sampled) and face
-    index (H, W, S) (-1)."""
+    index (H, W, S) (-1).
+
+    ``faces = (normal, offset, edges, nvert, bbox)`` (:func:`setup_faces`, :func:`int_boxes`),
+    ``bins = (start, items, tiles_u, tiles_v)`` (:func:`bin_faces`), ``cam = (fx, fy, cx,
+    cy)``, ``image = (width, height, near, far)``.
+    """
+    normal, offset, edges, nvert, bbox = faces
+    start, items, tiles_u, tiles_v = bins
+    fx, fy, cx, cy = cam
+    width, height, near, far = image
     ns = offsets.shape[0]
     depth = np.zeros((height, width, ns))
     face = np.full((height, width, ns), -1, dtype=np.int32)

@@ -1,0 +1,94 @@
+"""Input preparation shared by every estimator and by the module: depth validated, invalid
+pixels as NaN, and the dtype the vectorised row passes run in.
+
+Inside the kernels invalid depth is NaN (see :func:`prepare`), so ``z == z`` tests validity.
+Arithmetic is float64 in registers (except 3F2N's FD row pass, which runs in the dtype of the
+depth); outputs are float32.
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+from typing import Any
+
+import numpy as np
+
+from .._validate import check_depth
+from ..camera import Intrinsics, as_intrinsics
+
+__all__ = ["C_FX", "C_FY", "C_HALF", "C_INF", "C_MAX", "C_NINF", "C_ONE", "C_ZERO", "FLOAT32_RANGE",
+           "Pinhole", "new_output", "pinhole", "prepare", "row_arrays", "row_dtype"]
+
+
+def prepare(depth: Any, K: Any, depth_scale: float | None) -> tuple[np.ndarray, Intrinsics]:
+    """Validate inputs; return depth as a C-contiguous float array with NaN at invalid pixels."""
+    z = check_depth(depth, depth_scale=depth_scale)
+    cam = as_intrinsics(K)
+    bad = ~(np.isfinite(z) & (z > 0))
+    if bad.any():
+        z = np.where(bad, z.dtype.type(np.nan), z)
+    return z, cam
+
+
+def _depth_range(z: np.ndarray) -> tuple[float, float]:
+    """(min, max) of the valid depths (NaN skipped by fmin/fmax; NaN, NaN when none)."""
+    return float(np.fmin.reduce(z, axis=None)), float(np.fmax.reduce(z, axis=None))
+
+
+#: Depth range (any unit) and intrinsics magnitude in which the float32 row passes keep full
+#: float32 precision: squares of normal components and curvature terms stay normal numbers.
+FLOAT32_RANGE = (2.0 ** -24, 2.0 ** 24)
+
+
+def row_dtype(z: np.ndarray, fx: float = 1.0, fy: float = 1.0, cx: float = 0.0,
+              cy: float = 0.0) -> np.ndarray:
+    """``z`` as the vectorised row passes should see it: float32 stays float32 (8 lanes per
+    vector) when its finite depths and the intrinsics lie in :data:`FLOAT32_RANGE`;
+    anything else is promoted to float64 (a copy).
+    """
+    if z.dtype == np.float64:
+        return z
+    lo, hi = _depth_range(z)
+    big = FLOAT32_RANGE[1]
+    fits = (FLOAT32_RANGE[0] <= lo and hi <= big and FLOAT32_RANGE[0] <= min(abs(fx), abs(fy))
+            and max(abs(fx), abs(fy), abs(cx) + z.shape[1], abs(cy) + z.shape[0]) <= big)
+    if not (lo <= hi):  # no valid pixel at all (NaN)
+        fits = True
+    return z if fits else z.astype(np.float64)
+
+
+#: Pinhole intrinsics as the kernels take them (floats, pixels, 0-based pixel centres).
+Pinhole = namedtuple("Pinhole", ["fx", "fy", "cx", "cy"])
+
+
+def pinhole(cam: Intrinsics) -> Pinhole:
+    """The :class:`Pinhole` of validated intrinsics."""
+    return Pinhole(float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy))
+
+
+#: Slots of the constants row ``c`` that :func:`row_arrays` returns (in the dtype of the
+#: depth, so the vectorised row passes never convert): 0.5, 1, +inf, -inf, 0, fx, fy and the
+#: dtype's largest finite float. Kernels read ``c[C_ONE]``, never ``c[1]``.
+C_HALF, C_ONE, C_INF, C_NINF, C_ZERO, C_FX, C_FY, C_MAX = range(8)
+
+
+def row_arrays(z: np.ndarray, fx: float, fy: float, cx: float,
+               cy: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Typed inputs of the row kernels, in the dtype of ``z`` (as :func:`row_dtype` gives it).
+
+    ``c``: the constants row (slots :data:`C_HALF` .. :data:`C_MAX`), ``acol[u] = u - cx``,
+    ``bcol[v] = v - cy``. Casting huge or tiny intrinsics to float32 only happens where the
+    row passes are not used, so overflow and underflow are silent here.
+    """
+    h, w = z.shape
+    with np.errstate(over="ignore", under="ignore"):
+        c = np.array([0.5, 1.0, np.inf, -np.inf, 0.0, fx, fy, np.finfo(z.dtype).max],
+                     dtype=z.dtype)
+        acol = (np.arange(w) - cx).astype(z.dtype)
+        bcol = (np.arange(h) - cy).astype(z.dtype)
+    return c, acol, bcol
+
+
+def new_output(shape: tuple[int, int]) -> np.ndarray:
+    """An (H, W, 3) float32 array filled with NaN."""
+    return np.full((shape[0], shape[1], 3), np.nan, dtype=np.float32)
