@@ -4,7 +4,7 @@ Two rounds of :func:`depthnormals.cluster.map_batches`: the camera poses of each
 ``scene.json`` is missing (one scene a task: pose sampling renders many candidates), then
 every view whose files are not all there, in tasks of ``batch_size`` views of the same
 scene. Each view is written by the same function as in the serial run
-(:func:`depthnormals.synth.writer._write_view`) from the same seeds, so the files are
+(:func:`depthnormals.synth.views._write_view`) from the same seeds, so the files are
 byte-identical whatever the worker, and a re-run (after a lost worker, or a killed run)
 writes the same bytes again.
 """
@@ -53,7 +53,7 @@ class _ViewTask:
 
 
 def _scene_seed(t: _SceneTask) -> int | None:
-    from .writer import _KIND_ID
+    from .views import _KIND_ID
 
     if t.kind == "mesh":
         return None
@@ -69,7 +69,7 @@ def _scene(kind: str, index: int, seed: int | None, mesh: str | None) -> Scene:
 
 
 def _poses_task(t: _SceneTask) -> str:
-    from .writer import _KIND_ID, _scene_poses
+    from .views import _KIND_ID, _scene_poses
 
     seed = _scene_seed(t)
     scene = _scene(t.kind, t.index, seed, t.mesh)
@@ -79,7 +79,7 @@ def _poses_task(t: _SceneTask) -> str:
 
 
 def _view_task(v: _ViewTask) -> float | None:
-    from .writer import _KIND_ID, _write_view
+    from .views import _KIND_ID, _write_view
 
     t = v.scene
     seed = _scene_seed(t)
@@ -96,7 +96,7 @@ def generate_on_cluster(scheduler: str, root: Path, plan: list[tuple[str, int, s
     """Render ``plan`` into ``root`` on ``scheduler``; returns (written, skipped, render seconds)."""
     from .._progress import Progress
     from ..cluster import connect, map_batches
-    from .writer import _view_files
+    from .views import _view_files
 
     root = Path(root).absolute()
     tasks = [_SceneTask(str(root), kind, i, folder, meshes[i] if kind == "mesh" else None, seed, views,

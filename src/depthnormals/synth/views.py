@@ -1,0 +1,106 @@
+"""One view of a synthetic scene: the unit of work of :func:`depthnormals.synth.generate`.
+
+Serial or on a Dask worker (:mod:`depthnormals.synth._cluster`), every view is rendered from the
+same seeds by :func:`_write_view` and written atomically, so both give the same bytes.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..io import atomic_write, write_bytes_atomic
+from ..render import render_mesh, render_subsamples
+from . import noise as _noise
+from .poses import sample_poses
+from .scenes import Scene
+
+#: Scene kinds in the seed sequence (seed, kind, scene, stream, view).
+_KIND_ID = {"indoor": 0, "outdoor": 1, "mesh": 2}
+
+
+def _rng(seed: int, *keys: int) -> np.random.Generator:
+    return np.random.default_rng(np.random.SeedSequence([int(seed), *map(int, keys)]))
+
+
+def _save_npy(path: Path, arr: np.ndarray) -> None:
+    with atomic_write(path) as fh:
+        np.save(fh, arr, allow_pickle=False)
+
+
+def _write_json(path: Path, data: dict) -> None:
+    write_bytes_atomic(path, (json.dumps(data, indent=1, sort_keys=True) + "\n").encode())
+
+
+def _write_view(sdir: Path, scene: Scene, pose: np.ndarray, view: int, models: dict, seed: int, kid: int,
+                i: int, cam, size: tuple[int, int], near: float) -> float | None:
+    """Render view ``view`` of a scene and write its files (atomically); None if all exist.
+
+    Returns the seconds of the clean render. The unit of work of :func:`generate`, serial
+    or on a Dask worker (``depthnormals.synth._cluster``): the same bytes either way.
+    """
+    done = _view_files(sdir, view, models)
+    if all(p.is_file() for p in done):
+        return None
+    h, w = size
+    t0 = time.perf_counter()
+    r = render_mesh(scene.vertices, scene.faces, cam, pose=pose, width=w, height=h, near=near)
+    seconds = time.perf_counter() - t0
+    if not np.any(r.face >= 0):
+        raise ValueError(f"{sdir.parent.name}/{sdir.name} view {view}: the camera sees nothing")
+    _save_npy(done[0], r.normals.astype(np.float32))
+    _save_npy(done[1], r.face >= 0)
+    _save_npy(done[2], r.depth.astype(np.float32))
+    for k, (name, st) in enumerate(models.items()):
+        rng = _rng(seed, kid, i, 2 + _noise.MODELS.index(name), view)
+        noisy = _apply_model(name, st, r, scene, pose, cam, size, near, rng)
+        _save_npy(done[3 + k], noisy.astype(np.float32))
+    return seconds
+
+
+def _view_files(sdir: Path, view: int, models: dict) -> list[Path]:
+    name = f"{view:04d}.npy"
+    return [sdir / "normals" / name, sdir / "valid" / name, sdir / "clean" / name,
+            *[sdir / m / name for m in models]]
+
+
+def _scene_poses(sdir: Path, scene: Scene, kind: str, scene_seed: int | None, seed: int, kid: int,
+                 i: int, views: int, cam, size, near, constraints) -> np.ndarray:
+    info = sdir / "scene.json"
+    if info.is_file():
+        data = json.loads(info.read_text())
+        poses = np.asarray(data["poses"], dtype=np.float64)
+        if poses.shape == (views, 4, 4):
+            return poses
+        raise ValueError(f"{info} holds {poses.shape[0]} poses; expected {views}")
+    poses = sample_poses(scene, views, rng=_rng(seed, kid, i, 1), K=cam, size=size,
+                         constraints=constraints)
+    sdir.mkdir(parents=True, exist_ok=True)
+    data = {"name": sdir.name, "kind": kind, **scene.meta, "scene_seed": scene_seed,
+            "n_faces": int(scene.faces.shape[0]), "n_vertices": int(scene.vertices.shape[0]),
+            "K": {"fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy}, "size": list(size),
+            "near": near, "pose_convention": "camera-to-world, OpenCV camera axes, world z up, metres",
+            "poses": poses.tolist()}
+    _write_json(info, data)
+    return poses
+
+
+def _apply_model(name: str, st: dict, r, scene: Scene, pose, cam, size, near, rng) -> np.ndarray:
+    if name == "gaussian":
+        return _noise.gaussian_noise(r.depth, cam, rng=rng, sigma=st["sigma"], sigma_px=st["sigma_px"])
+    if name == "kinect_v1":
+        return _noise.kinect_v1_noise(r.depth, r.normals, cam, rng=rng, focal=st["focal"],
+                                      baseline=st["baseline"], subpixel=st["subpixel"])
+    s = st["supersample"]
+    sub = None
+    if s > 1:
+        h, w = size
+        sub = render_subsamples(scene.vertices, scene.faces, cam, pose=pose, width=w, height=h,
+                                factor=s, mask=_noise.discontinuity_mask(r.depth), near=near)
+    return _noise.kinect_v2_noise(r.depth, r.normals, cam, rng=rng, subsamples=sub,
+                                  min_range=st["min_range"], max_range=st["max_range"],
+                                  dropout_deg=st["dropout_deg"],
+                                  dropout_width_deg=st["dropout_width_deg"], rounding=st["rounding"])
