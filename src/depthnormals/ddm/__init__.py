@@ -6,16 +6,20 @@
 """
 
 from ._module import NEIGHBOURHOODS, discontinuity_discrimination, fused_plus, module_defaults
+from .boxfit import box_fit_normals  # r13 wiring
 from .correlation import CORRELATIONS, kendall_map
 from .curvature import CURVATURES, DERIVATIVES, depth_curvature
+from .noise import estimate_noise  # r13 wiring
 
 __all__ = [
     "CORRELATIONS",
     "CURVATURES",
     "DERIVATIVES",
     "NEIGHBOURHOODS",
+    "box_fit_normals",  # r13 wiring
     "depth_curvature",
     "discontinuity_discrimination",
+    "estimate_noise",  # r13 wiring
     "fused_plus",
     "kendall_map",
     "module_defaults",

@@ -23,7 +23,7 @@ NEIGHBOURHOODS = ("square", "cross")
 _CURV = (*CURVATURES, "none")
 
 
-SELECTIONS = ("curvature", "plane-fit")
+SELECTIONS = ("curvature", "plane-fit", "box-fit", "auto")  # r13 wiring: two new values
 
 
 def _empty(shape: tuple[int, ...]) -> np.ndarray:
@@ -241,6 +241,10 @@ def _refine(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
             o: dict[str, Any]) -> np.ndarray:
     """The three stages on prepared depth (as ``row_dtype`` gives it); ``n0``/``k`` given:
     stage 1 already done."""
+    if n0 is None and o["selection"] in ("auto", "box-fit"):  # r13 wiring
+        from .auto import refine_auto  # r13 wiring
+        return refine_auto(z, fx, fy, cx, cy, n_in, o,  # r13 wiring
+                           lambda oc: _refine(z, fx, fy, cx, cy, n_in, None, None, oc))  # r13 wiring
     curvature, correlation, crf = o["curvature"], o["correlation"], o["crf"]
     offs = CROSS if o["neighbourhood"] == "cross" else SQUARE
     if n0 is None:
@@ -317,6 +321,10 @@ def fused_plus(base: str, depth: Any, K: Any, depth_scale: float | None,
             and ks == 3 and _is_str(agg, "median", "mean")):
         return None
     o = _options(**{**module_defaults(), **module_options})
+    if o["selection"] in ("auto", "box-fit"):  # r13 wiring
+        from .auto import auto_fused  # r13 wiring
+        return auto_fused(fused_plus, base, depth, K, depth_scale, estimator_options,  # r13 wiring
+                          module_options, o)  # r13 wiring
     if not (o["curvature"] in ("mean", "max") and o["derivatives"] == "inverse-depth"
             and o["slope"] == "min" and o["footprint"] == "pixel"
             and o["selection"] == "curvature" and o["neighbourhood"] == "cross"):

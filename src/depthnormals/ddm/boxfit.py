@@ -1,0 +1,324 @@
+"""Box-fit: least-squares planes in inverse depth over box windows, at box-filter cost.
+
+A plane ``n . X = d`` seen by a pinhole camera makes inverse depth exactly linear in the
+pixel coordinates (NOTES section 2, 3F2N):
+
+    w = 1 / z = a (u - u_c) + b (v - v_c) + c,   n ~ (fx a, fy b, c - a (u_c - cx) - b (v_c - cy))
+
+(``(u_c, v_c)`` any reference pixel, here the window centre; the sign is then turned toward
+the camera). So an ordinary least-squares fit of ``(a, b, c)`` to the valid pixels of a
+``(2 r + 1)^2`` window gives the plane's normal from ten sums - ``1, du, dv, du^2, du dv,
+dv^2, w, du w, dv w, w^2`` with ``du, dv`` window-local - and the residual sum of squares
+``RSS = sum w^2 - (a sum du w + b sum dv w + c sum w)`` from the same sums. The sums are
+separable: a row pass (six sums over ``du``) and a column pass (ten over ``dv``) per pixel,
+like a box filter; nothing loops over candidate normals.
+
+Edge awareness (Kuwahara-like): every pixel ``q`` then chooses among the windows that contain
+it - the window centred on ``q`` and the eight centred at ``q + s (i, j)``, ``i, j`` in
+``{-1, 0, 1}``, ``s <= r``, which hold ``q`` at an edge or corner - the one whose plane
+explains its points best: the least residual variance ``RSS / (N - 3)``, in footprints
+``(z / fx)^2``. The centred window (unbiased on curved surfaces) is kept outright while its
+residual is within ``gate`` (noise variance times a factor), and otherwise needs to be
+beaten by the factor ``self_weight``. The normal of the chosen window is the pixel's normal.
+
+This is FALS's estimate in another parametrisation (FALS fits ``1 / r`` over unit rays) with
+the window choice of the plane-fit selection (:mod:`depthnormals.ddm.planefit`) reduced to
+nine precomputed windows. Ours (issue 13); measured in docs/3f2n-plus.md.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numba as nb
+import numpy as np
+
+from .._parallel import run_rows
+from ..estimators._common import prepare, store_normal
+
+__all__ = ["SHIFTS", "box_fit_normals", "box_fit_windows", "choose_windows"]
+
+_JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
+# reassociation lets LLVM vectorise the sums; no-NaN flags are never allowed
+_FASTMATH = {"reassoc", "contract", "nsz", "arcp"}
+#: The fewest valid pixels a window needs (three parameters, a residual of >= 3 degrees).
+MIN_POINTS = 6
+
+#: Window-centre offsets (dv, du) in units of the shift ``s``, the centred window first
+#: (it wins ties).
+SHIFTS = np.array([[0, 0], [-1, 0], [0, -1], [0, 1], [1, 0], [-1, -1], [-1, 1], [1, -1],
+                   [1, 1]], dtype=np.int64)
+
+# Row sums (index of the first axis of a ring slot): count, sum du, sum du^2, sum w,
+# sum du w, sum w^2 over the valid pixels of the row segment u - r .. u + r.
+_R_N, _R_U, _R_UU, _R_W, _R_UW, _R_WW = range(6)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", fastmath=_FASTMATH)
+def _row_sums(zrow, r, wpad, mpad, out_rs):
+    """The six row sums of one depth row (``zrow``, NaN invalid) for windows of half-width
+    ``r``; ``wpad``, ``mpad`` (W + 2 r) scratch whose ``r`` border cells stay 0; writes
+    ``out_rs`` (6, W)."""
+    w = zrow.size
+    for u in range(w):
+        zz = np.float64(zrow[u])
+        ok = zz == zz
+        wpad[u + r] = 1.0 / zz if ok else 0.0
+        mpad[u + r] = 1.0 if ok else 0.0
+    out_rs[:, :] = 0.0
+    for k in range(-r, r + 1):
+        kf = np.float64(k)
+        k2 = kf * kf
+        for u in range(w):
+            m = mpad[u + r + k]
+            x = wpad[u + r + k]
+            out_rs[_R_N, u] += m
+            out_rs[_R_U, u] += kf * m
+            out_rs[_R_UU, u] += k2 * m
+            out_rs[_R_W, u] += x
+            out_rs[_R_UW, u] += kf * x
+            out_rs[_R_WW, u] += x * x
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", fastmath=_FASTMATH)
+def _column_sums(ring, v, h, r, out_s):
+    """The ten window sums of row ``v`` from the ring of row sums (slot ``row % (2 r + 1)``):
+    ``out_s`` (10, W) = n, su, sv, suu, suv, svv, sw, suw, svw, sww."""
+    out_s[:, :] = 0.0
+    w = out_s.shape[1]
+    for dv in range(-r, r + 1):
+        row = v + dv
+        if row < 0 or row >= h:
+            continue
+        rs = ring[row % (2 * r + 1)]
+        k = np.float64(dv)
+        k2 = k * k
+        for u in range(w):
+            n = rs[_R_N, u]
+            su = rs[_R_U, u]
+            sw = rs[_R_W, u]
+            out_s[0, u] += n
+            out_s[1, u] += su
+            out_s[2, u] += k * n
+            out_s[3, u] += rs[_R_UU, u]
+            out_s[4, u] += k * su
+            out_s[5, u] += k2 * n
+            out_s[6, u] += sw
+            out_s[7, u] += rs[_R_UW, u]
+            out_s[8, u] += k * sw
+            out_s[9, u] += rs[_R_WW, u]
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def solve_window(n, su, sv, suu, suv, svv, sw, suw, svw, sww):
+    """Least squares ``w = a du + b dv + c`` from the ten sums: (a, b, c, RSS), or NaNs
+    where the window has fewer than :data:`MIN_POINTS` points or is degenerate (collinear)."""
+    nan = np.nan
+    if n < MIN_POINTS:
+        return nan, nan, nan, nan
+    c00 = svv * n - sv * sv
+    c01 = sv * su - suv * n
+    c02 = suv * sv - svv * su
+    c11 = suu * n - su * su
+    c12 = su * suv - suu * sv
+    c22 = suu * svv - suv * suv
+    det = suu * c00 + suv * c01 + su * c02
+    if not (det > 1e-9 * n * n * n):
+        return nan, nan, nan, nan
+    inv = 1.0 / det
+    a = (c00 * suw + c01 * svw + c02 * sw) * inv
+    b = (c01 * suw + c11 * svw + c12 * sw) * inv
+    c = (c02 * suw + c12 * svw + c22 * sw) * inv
+    rss = sww - (a * suw + b * svw + c * sw)
+    return a, b, c, (rss if rss > 0.0 else 0.0)
+
+
+@nb.njit(**_JIT)
+def _fit_rows(v0, v1, z, fx, fy, cx, cy, r, out_n, out_score):
+    """Rows ``[v0, v1)`` of the centred-window fits: ``out_n`` (H, W, 3) float32 unit
+    normals facing the camera (NaN: no fit), ``out_score`` (H, W) float32 residual variance
+    ``RSS / (N - 3)`` in footprints^2 ``(fx / c)^2`` (inf: no fit)."""
+    h, w = z.shape
+    span = 2 * r + 1
+    ring = np.zeros((span, 6, w))
+    wpad = np.zeros(w + 2 * r)
+    mpad = np.zeros(w + 2 * r)
+    s = np.empty((10, w))
+    nxt = max(v0 - r, 0)
+    for v in range(v0, v1):
+        while nxt <= min(v + r, h - 1):
+            _row_sums(z[nxt], r, wpad, mpad, ring[nxt % span])
+            nxt += 1
+        _column_sums(ring, v, h, r, s)
+        bv = v - cy
+        for u in range(w):
+            n = s[0, u]
+            a, b, c, rss = solve_window(n, s[1, u], s[2, u], s[3, u], s[4, u], s[5, u], s[6, u],
+                                        s[7, u], s[8, u], s[9, u])
+            if not (c > 0.0):  # no fit (NaN) or a plane behind the camera
+                out_n[v, u, 0] = np.nan
+                out_n[v, u, 1] = np.nan
+                out_n[v, u, 2] = np.nan
+                out_score[v, u] = np.inf
+                continue
+            au = u - cx
+            store_normal(out_n, v, u, fx * a, fy * b, c - a * au - b * bv, au / fx, bv / fy, 1.0)
+            zc = fx / c
+            out_score[v, u] = rss / (n - 3.0) * zc * zc
+
+
+def box_fit_windows(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
+                    radius: int) -> tuple[np.ndarray, np.ndarray]:
+    """Centred-window fits of prepared depth ``z`` (NaN invalid): normals (H, W, 3) float32
+    (NaN where a window has no fit) and residual variances (H, W) float32 in footprints^2
+    (inf there). A window needs :data:`MIN_POINTS` valid pixels, not the centre's."""
+    h, w = z.shape
+    out_n = np.empty((h, w, 3), dtype=np.float32)
+    out_s = np.empty((h, w), dtype=np.float32)
+    run_rows(_fit_rows, h, z, float(fx), float(fy), float(cx), float(cy), int(radius), out_n,
+             out_s, min_rows=16)
+    return out_n, out_s
+
+
+@nb.njit(**_JIT)
+def _choose_rows(v0, v1, z, fit_n, score, big_n, big_score, shift, gate, self_weight, fx, fy,
+                 cx, cy, out):
+    """Rows ``[v0, v1)`` of the window choice (see :func:`choose_windows`)."""
+    h, w = z.shape
+    use_big = big_score.shape[0] == h
+    for v in range(v0, v1):
+        for u in range(w):
+            zq = z[v, u]
+            if not (zq == zq):
+                out[v, u, 0] = np.nan
+                out[v, u, 1] = np.nan
+                out[v, u, 2] = np.nan
+                continue
+            if use_big and np.float64(big_score[v, u]) <= gate:
+                store_normal(out, v, u, np.float64(big_n[v, u, 0]), np.float64(big_n[v, u, 1]),
+                             np.float64(big_n[v, u, 2]), (u - cx) / fx, (v - cy) / fy, 1.0)
+                continue
+            s0 = np.float64(score[v, u])
+            bv = v
+            bu = u
+            best = s0 * self_weight
+            if not (s0 <= gate):
+                for k in range(1, SHIFTS.shape[0]):
+                    r = v + shift * SHIFTS[k, 0]
+                    c = u + shift * SHIFTS[k, 1]
+                    if r < 0 or r >= h or c < 0 or c >= w:
+                        continue
+                    sk = np.float64(score[r, c])
+                    if sk < best:
+                        best = sk
+                        bv = r
+                        bu = c
+            if not (best < np.inf):
+                out[v, u, 0] = np.nan
+                out[v, u, 1] = np.nan
+                out[v, u, 2] = np.nan
+                continue
+            store_normal(out, v, u, np.float64(fit_n[bv, bu, 0]), np.float64(fit_n[bv, bu, 1]),
+                         np.float64(fit_n[bv, bu, 2]), (u - cx) / fx, (v - cy) / fy, 1.0)
+
+
+def choose_windows(z: np.ndarray, fit_n: np.ndarray, score: np.ndarray, fx: float, fy: float,
+                   cx: float, cy: float, *, shift: int, gate: float, self_weight: float,
+                   out: np.ndarray, big: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+    """Every valid pixel takes the normal of the best of its nine windows (module doc).
+
+    With ``big`` (the normals and scores of larger centred windows), a pixel whose large
+    window has a residual variance ``<= gate`` takes the large window's normal first.
+
+    The centred window is kept when its residual variance ``score`` is ``<= gate``; otherwise
+    the window of least score among the nine wins, the centred one's score multiplied by
+    ``self_weight`` first (it wins ties). Writes every pixel of ``out`` (H, W, 3) float32:
+    NaN at invalid depth and where no window has a fit.
+    """
+    big_n, big_s = big if big is not None else (fit_n[:1], score[:1])
+    run_rows(_choose_rows, z.shape[0], z, fit_n, score, big_n, big_s, int(shift), float(gate),
+             float(self_weight), float(fx), float(fy), float(cx), float(cy), out, min_rows=16)
+
+
+def box_fit_from_prepared(z: np.ndarray, fx: float, fy: float, cx: float, cy: float, *,
+                          radius: int, shift: int, gate: float, self_weight: float,
+                          big_radius: int = 0) -> np.ndarray:
+    """:func:`box_fit_normals` on prepared depth."""
+    fit_n, score = box_fit_windows(z, fx, fy, cx, cy, radius)
+    big = box_fit_windows(z, fx, fy, cx, cy, big_radius) if big_radius > radius else None
+    out = np.empty_like(fit_n)
+    choose_windows(z, fit_n, score, fx, fy, cx, cy, shift=shift, gate=gate,
+                   self_weight=self_weight, out=out, big=big)
+    return out
+
+
+def _check_int(value: Any, name: str, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer in {lo}..{hi}; got {value!r}")
+    if not lo <= value <= hi:
+        raise ValueError(f"{name} must be in {lo}..{hi}; got {value}")
+    return int(value)
+
+
+def _check_float(value: Any, name: str, lo: float, hi: float) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name} must be a real number in [{lo}, {hi}]; got {value!r}")
+    value = float(value)
+    if not lo <= value <= hi:
+        raise ValueError(f"{name} must be in [{lo}, {hi}]; got {value!r}")
+    return value
+
+
+def box_fit_normals(depth: Any, K: Any, *, radius: int = 2, shift: int | None = None,
+                    gate: float = 0.0, self_weight: float = 1.0, big_radius: int = 0,
+                    depth_scale: float | None = None) -> np.ndarray:
+    """Normals from least-squares planes in inverse depth over box windows (module doc).
+
+    Parameters
+    ----------
+    depth : array_like, shape (H, W)
+        Planar depth. float32/float64; integers need ``depth_scale``. Invalid depth (0,
+        negative, NaN, inf) gives NaN and never enters a fit.
+    K : Intrinsics, array (3, 3) or (fx, fy, cx, cy)
+        Intrinsics in pixels, 0-based pixel centres.
+    radius : int in 1..8, default 2
+        Windows of ``(2 radius + 1)^2`` pixels.
+    shift : int in 0..radius, optional
+        Offset of the eight shifted windows (default ``radius``: the pixel at their edge or
+        corner). 0 keeps the centred window (a plain box fit, FALS-like).
+    gate : float >= 0, default 0
+        Residual variance (footprints^2) up to which the centred window is kept outright.
+    self_weight : float in (0, 1], default 1
+        The centred window's residual is multiplied by it before the comparison.
+    big_radius : int in 0..16, default 0
+        With ``big_radius > radius``: a pixel whose centred ``(2 big_radius + 1)^2`` window
+        has a residual variance ``<= gate`` takes that window's normal (one plane within the
+        noise: the larger support wins); 0: off.
+    depth_scale : float, optional
+        Metres per unit of integer depth.
+
+    Returns
+    -------
+    normals : ndarray, shape (H, W, 3), float32
+        Unit normals facing the camera; NaN at invalid depth and where no window holds
+        :data:`MIN_POINTS` valid pixels.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from depthnormals.analytic import tilted_plane
+    >>> r = tilted_plane().render(shape=(40, 50), K=(60.0, 60.0, 24.5, 19.5))
+    >>> n = box_fit_normals(r.depth, r.K)
+    >>> bool(np.abs(n - r.normals).max() < 1e-5)
+    True
+    """
+    rad = _check_int(radius, "radius", 1, 8)
+    sh = rad if shift is None else _check_int(shift, "shift", 0, rad)
+    g = _check_float(gate, "gate", 0.0, np.inf)
+    sw = _check_float(self_weight, "self_weight", 0.0, 1.0)
+    big = _check_int(big_radius, "big_radius", 0, 16)
+    if sw == 0.0:
+        raise ValueError("self_weight must be > 0")
+    z, cam = prepare(depth, K, depth_scale)
+    return box_fit_from_prepared(z, cam.fx, cam.fy, cam.cx, cam.cy, radius=rad, shift=sh,
+                                 gate=g, self_weight=sw, big_radius=big)
