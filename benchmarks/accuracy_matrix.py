@@ -17,7 +17,8 @@ crease > 10 deg or depth jump > 5 %); the errors of a group's frames are pooled.
 
 ``--out`` accumulates: methods already in the file are not recomputed (``--force`` redoes).
 ``--pairs`` prints the ratio of mean errors "<x>+" / "<x>" for every base x listed with its
-"+" form (a ratio above 1.005 is marked ``!``).
+"+" form (``--plus-suffix '[selection=auto]'``: "<x>+[selection=auto]"; a ratio above 1.005
+is marked ``!``; where both errors are below 0.001 deg both are printed).
 """
 
 from __future__ import annotations
@@ -121,12 +122,12 @@ def table(results: dict, labels: list[str], groups: list[str], metric: str) -> s
     return "\n".join(lines)
 
 
-def pairs(results: dict, labels: list[str], groups: list[str]) -> str:
-    lines = ["### never hurts: mean error '<x>+' / '<x>' ('!' > 1.005)", "",
+def pairs(results: dict, labels: list[str], groups: list[str], suffix: str = "") -> str:
+    lines = [f"### never hurts: mean error '<x>+{suffix}' / '<x>' ('!' > 1.005)", "",
              "| base | " + " | ".join(groups) + " |", "|---|" + "---:|" * len(groups)]
     for lab in labels:
         plus = lab.split("[", 1)
-        plus = plus[0] + "+" + ("[" + plus[1] if len(plus) > 1 else "")
+        plus = plus[0] + "+" + ("[" + plus[1] if len(plus) > 1 else suffix)
         if lab.split("[")[0].endswith("+") or plus not in results:
             continue
         cells = []
@@ -150,6 +151,8 @@ def main() -> None:
     p.add_argument("--force", action="store_true", help="recompute methods already in --out")
     p.add_argument("--metrics", default="mean")
     p.add_argument("--pairs", action="store_true")
+    p.add_argument("--plus-suffix", default="",
+                   help="options of the '+' forms in --pairs, e.g. '[selection=auto]'")
     p.add_argument("--threads", type=int, default=1)
     a = p.parse_args()
     dn.set_num_threads(a.threads)
@@ -182,7 +185,7 @@ def main() -> None:
         print(table(results, labels, groups, metric))
         print()
     if a.pairs:
-        print(pairs(results, labels, groups))
+        print(pairs(results, labels, groups, a.plus_suffix))
 
 
 if __name__ == "__main__":

@@ -49,73 +49,74 @@ MIN_POINTS = 6
 SHIFTS = np.array([[0, 0], [-1, 0], [0, -1], [0, 1], [1, 0], [-1, -1], [-1, 1], [1, -1],
                    [1, 1]], dtype=np.int64)
 
-# Row sums (index of the first axis of a ring slot): count, sum du, sum du^2, sum w,
-# sum du w, sum w^2 over the valid pixels of the row segment u - r .. u + r.
+# Row sums (index of the first axis of a ring slot), over the valid pixels of the row
+# segment u - r .. u + r: count, sum du, sum du^2, sum w, sum du w, sum w^2.
 _R_N, _R_U, _R_UU, _R_W, _R_UW, _R_WW = range(6)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", fastmath=_FASTMATH)
-def _row_sums(zrow, r, wpad, mpad, out_rs):
-    """The six row sums of one depth row (``zrow``, NaN invalid) for windows of half-width
-    ``r``; ``wpad``, ``mpad`` (W + 2 r) scratch whose ``r`` border cells stay 0; writes
-    ``out_rs`` (6, W)."""
+def _row_sums(zrow, r, xm, xw, out_rs):
+    """The six row sums of one depth row (``zrow``, NaN invalid) for half-width ``r``, as
+    running sums: O(1) per pixel whatever ``r``. ``xm``, ``xw`` (W + 2 r + 2) scratch whose
+    border cells stay 0 (pixel u at index u + r + 1); writes ``out_rs`` (6, W).
+
+    Moving the window from u to u + 1 (entering value e, leaving value l, sums over the
+    local offsets k of ``x``, ``k x``, ``k^2 x``): ``T0' = T0 + e - l``,
+    ``T1' = T1 + r l + (r + 1) e - T0'``,
+    ``T2' = T2 - r^2 l + (r + 1)^2 e - 2 (T1 + r l + (r + 1) e) + T0'``.
+    """
     w = zrow.size
+    o = r + 1
     for u in range(w):
         zz = np.float64(zrow[u])
         ok = zz == zz
-        wpad[u + r] = 1.0 / zz if ok else 0.0
-        mpad[u + r] = 1.0 if ok else 0.0
-    out_rs[:, :] = 0.0
+        xw[u + o] = 1.0 / zz if ok else 0.0
+        xm[u + o] = 1.0 if ok else 0.0
+    t0m = 0.0
+    t1m = 0.0
+    t2m = 0.0
+    t0w = 0.0
+    t1w = 0.0
+    t0q = 0.0
     for k in range(-r, r + 1):
-        kf = np.float64(k)
-        k2 = kf * kf
-        for u in range(w):
-            m = mpad[u + r + k]
-            x = wpad[u + r + k]
-            out_rs[_R_N, u] += m
-            out_rs[_R_U, u] += kf * m
-            out_rs[_R_UU, u] += k2 * m
-            out_rs[_R_W, u] += x
-            out_rs[_R_UW, u] += kf * x
-            out_rs[_R_WW, u] += x * x
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy", fastmath=_FASTMATH)
-def _column_sums(ring, v, h, r, out_s):
-    """The ten window sums of row ``v`` from the ring of row sums (slot ``row % (2 r + 1)``):
-    ``out_s`` (10, W) = n, su, sv, suu, suv, svv, sw, suw, svw, sww."""
-    out_s[:, :] = 0.0
-    w = out_s.shape[1]
-    for dv in range(-r, r + 1):
-        row = v + dv
-        if row < 0 or row >= h:
-            continue
-        rs = ring[row % (2 * r + 1)]
-        k = np.float64(dv)
-        k2 = k * k
-        for u in range(w):
-            n = rs[_R_N, u]
-            su = rs[_R_U, u]
-            sw = rs[_R_W, u]
-            out_s[0, u] += n
-            out_s[1, u] += su
-            out_s[2, u] += k * n
-            out_s[3, u] += rs[_R_UU, u]
-            out_s[4, u] += k * su
-            out_s[5, u] += k2 * n
-            out_s[6, u] += sw
-            out_s[7, u] += rs[_R_UW, u]
-            out_s[8, u] += k * sw
-            out_s[9, u] += rs[_R_WW, u]
+        m = xm[k + o]
+        x = xw[k + o]
+        t0m += m
+        t1m += k * m
+        t2m += k * k * m
+        t0w += x
+        t1w += k * x
+        t0q += x * x
+    rf = np.float64(r)
+    r1 = rf + 1.0
+    for u in range(w):
+        if u > 0:
+            em = xm[u + 2 * r + 1]
+            lm = xm[u]
+            ew = xw[u + 2 * r + 1]
+            lw = xw[u]
+            n0 = t0m + em - lm
+            s1 = t1m + rf * lm + r1 * em
+            t2m = t2m - rf * rf * lm + r1 * r1 * em - 2.0 * s1 + n0
+            t1m = s1 - n0
+            t0m = n0
+            n0 = t0w + ew - lw
+            t1w = t1w + rf * lw + r1 * ew - n0
+            t0w = n0
+            t0q = t0q + ew * ew - lw * lw
+        out_rs[_R_N, u] = t0m
+        out_rs[_R_U, u] = t1m
+        out_rs[_R_UU, u] = t2m
+        out_rs[_R_W, u] = t0w
+        out_rs[_R_UW, u] = t1w
+        out_rs[_R_WW, u] = t0q
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
 def solve_window(n, su, sv, suu, suv, svv, sw, suw, svw, sww):
-    """Least squares ``w = a du + b dv + c`` from the ten sums: (a, b, c, RSS), or NaNs
-    where the window has fewer than :data:`MIN_POINTS` points or is degenerate (collinear)."""
-    nan = np.nan
-    if n < MIN_POINTS:
-        return nan, nan, nan, nan
+    """Least squares ``w = a du + b dv + c`` from the ten sums: (a, b, c, RSS, ok), ``ok``
+    False where the window has fewer than :data:`MIN_POINTS` points or is degenerate
+    (collinear); branch-free (the values are then meaningless)."""
     c00 = svv * n - sv * sv
     c01 = sv * su - suv * n
     c02 = suv * sv - svv * su
@@ -123,57 +124,122 @@ def solve_window(n, su, sv, suu, suv, svv, sw, suw, svw, sww):
     c12 = su * suv - suu * sv
     c22 = suu * svv - suv * suv
     det = suu * c00 + suv * c01 + su * c02
-    if not (det > 1e-9 * n * n * n):
-        return nan, nan, nan, nan
-    inv = 1.0 / det
+    ok = (n >= MIN_POINTS) & (det > 1e-9 * n * n * n)
+    inv = 1.0 / (det if ok else 1.0)
     a = (c00 * suw + c01 * svw + c02 * sw) * inv
     b = (c01 * suw + c11 * svw + c12 * sw) * inv
     c = (c02 * suw + c12 * svw + c22 * sw) * inv
     rss = sww - (a * suw + b * svw + c * sw)
-    return a, b, c, (rss if rss > 0.0 else 0.0)
+    return a, b, c, (rss if rss > 0.0 else 0.0), ok
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", fastmath=_FASTMATH)
+def _solve_row(t0, t1m0, t1m1, t1w, t2m0, fx, fy, acol, bv, out_x, out_y, out_z, out_s):
+    """Fits of one row from its window sums (``t0`` (6, W): the column sums of the six row
+    sums; ``t1*``: the dv-weighted ones; ``t2m0``: sum dv^2): unit normals facing the camera
+    into ``out_x, out_y, out_z`` (NaN: no fit), residual variances in footprints^2 into
+    ``out_s`` (inf: no fit). Branch-free, so it vectorises."""
+    nan = np.nan
+    inf = np.inf
+    ifx = 1.0 / fx
+    ify = 1.0 / fy
+    for u in range(acol.size):
+        n = t0[_R_N, u]
+        a, b, c, rss, ok = solve_window(n, t0[_R_U, u], t1m0[u], t0[_R_UU, u], t1m1[u], t2m0[u],
+                                        t0[_R_W, u], t0[_R_UW, u], t1w[u], t0[_R_WW, u])
+        au = acol[u]
+        nx = fx * a
+        ny = fy * b
+        nz = c - a * au - b * bv
+        good = ok & (c > 0.0)
+        s = 1.0 / np.sqrt(nx * nx + ny * ny + nz * nz)
+        s = -s if nx * au * ifx + ny * bv * ify + nz > 0.0 else s
+        zc = fx / c
+        out_x[u] = nx * s if good else nan
+        out_y[u] = ny * s if good else nan
+        out_z[u] = nz * s if good else nan
+        out_s[u] = rss / (n - 3.0) * zc * zc if good else inf
 
 
 @nb.njit(**_JIT)
 def _fit_rows(v0, v1, z, fx, fy, cx, cy, r, out_n, out_score):
-    """Rows ``[v0, v1)`` of the centred-window fits: ``out_n`` (H, W, 3) float32 unit
+    """Rows ``[v0, v1)`` of the centred-window fits: ``out_n`` (3, H, W) float32 planar unit
     normals facing the camera (NaN: no fit), ``out_score`` (H, W) float32 residual variance
-    ``RSS / (N - 3)`` in footprints^2 ``(fx / c)^2`` (inf: no fit)."""
+    ``RSS / (N - 3)`` in footprints^2 ``(fx / c)^2`` (inf: no fit).
+
+    Row sums (:func:`_row_sums`) go into a ring of ``2 r + 2`` rows; the column sums are
+    running sums down the band with the recurrences of :func:`_row_sums` (``dv`` for ``du``),
+    started directly at ``v0``: O(1) per pixel whatever ``r``.
+    """
     h, w = z.shape
-    span = 2 * r + 1
+    span = 2 * r + 2
     ring = np.zeros((span, 6, w))
-    wpad = np.zeros(w + 2 * r)
-    mpad = np.zeros(w + 2 * r)
-    s = np.empty((10, w))
+    zero = np.zeros((6, w))
+    xm = np.zeros(w + 2 * r + 2)
+    xw = np.zeros(w + 2 * r + 2)
+    t0 = np.zeros((6, w))
+    t1m0 = np.zeros(w)
+    t1m1 = np.zeros(w)
+    t1w = np.zeros(w)
+    t2m0 = np.zeros(w)
+    acol = np.arange(w) - cx
+    rf = np.float64(r)
+    r1 = rf + 1.0
     nxt = max(v0 - r, 0)
     for v in range(v0, v1):
         while nxt <= min(v + r, h - 1):
-            _row_sums(z[nxt], r, wpad, mpad, ring[nxt % span])
+            _row_sums(z[nxt], r, xm, xw, ring[nxt % span])
             nxt += 1
-        _column_sums(ring, v, h, r, s)
-        bv = v - cy
-        for u in range(w):
-            n = s[0, u]
-            a, b, c, rss = solve_window(n, s[1, u], s[2, u], s[3, u], s[4, u], s[5, u], s[6, u],
-                                        s[7, u], s[8, u], s[9, u])
-            if not (c > 0.0):  # no fit (NaN) or a plane behind the camera
-                out_n[v, u, 0] = np.nan
-                out_n[v, u, 1] = np.nan
-                out_n[v, u, 2] = np.nan
-                out_score[v, u] = np.inf
-                continue
-            au = u - cx
-            store_normal(out_n, v, u, fx * a, fy * b, c - a * au - b * bv, au / fx, bv / fy, 1.0)
-            zc = fx / c
-            out_score[v, u] = rss / (n - 3.0) * zc * zc
+        if v == v0:  # direct sums over dv = -r .. r
+            for dv in range(-r, r + 1):
+                row = v + dv
+                if row < 0 or row >= h:
+                    continue
+                rs = ring[row % span]
+                k = np.float64(dv)
+                for u in range(w):
+                    for j in range(6):
+                        t0[j, u] += rs[j, u]
+                    t1m0[u] += k * rs[_R_N, u]
+                    t1m1[u] += k * rs[_R_U, u]
+                    t1w[u] += k * rs[_R_W, u]
+                    t2m0[u] += k * k * rs[_R_N, u]
+        else:  # running: row v + r enters, row v - r - 1 leaves
+            e = ring[(v + r) % span] if v + r < h else zero
+            lv = ring[(v - r - 1) % span] if v - r - 1 >= 0 else zero
+            for u in range(w):
+                em = e[_R_N, u]
+                lm = lv[_R_N, u]
+                n0 = t0[_R_N, u] + em - lm
+                s1 = t1m0[u] + rf * lm + r1 * em
+                t2m0[u] = t2m0[u] - rf * rf * lm + r1 * r1 * em - 2.0 * s1 + n0
+                t1m0[u] = s1 - n0
+                t0[_R_N, u] = n0
+                eu = e[_R_U, u]
+                lu = lv[_R_U, u]
+                n0 = t0[_R_U, u] + eu - lu
+                t1m1[u] = t1m1[u] + rf * lu + r1 * eu - n0
+                t0[_R_U, u] = n0
+                ew = e[_R_W, u]
+                lw = lv[_R_W, u]
+                n0 = t0[_R_W, u] + ew - lw
+                t1w[u] = t1w[u] + rf * lw + r1 * ew - n0
+                t0[_R_W, u] = n0
+                t0[_R_UU, u] += e[_R_UU, u] - lv[_R_UU, u]
+                t0[_R_UW, u] += e[_R_UW, u] - lv[_R_UW, u]
+                t0[_R_WW, u] += e[_R_WW, u] - lv[_R_WW, u]
+        _solve_row(t0, t1m0, t1m1, t1w, t2m0, fx, fy, acol, v - cy, out_n[0, v], out_n[1, v],
+                   out_n[2, v], out_score[v])
 
 
 def box_fit_windows(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
                     radius: int) -> tuple[np.ndarray, np.ndarray]:
-    """Centred-window fits of prepared depth ``z`` (NaN invalid): normals (H, W, 3) float32
-    (NaN where a window has no fit) and residual variances (H, W) float32 in footprints^2
-    (inf there). A window needs :data:`MIN_POINTS` valid pixels, not the centre's."""
+    """Centred-window fits of prepared depth ``z`` (NaN invalid): planar normals (3, H, W)
+    float32 (NaN where a window has no fit) and residual variances (H, W) float32 in
+    footprints^2 (inf there). A window needs :data:`MIN_POINTS` valid pixels, not the
+    centre's."""
     h, w = z.shape
-    out_n = np.empty((h, w, 3), dtype=np.float32)
+    out_n = np.empty((3, h, w), dtype=np.float32)
     out_s = np.empty((h, w), dtype=np.float32)
     run_rows(_fit_rows, h, z, float(fx), float(fy), float(cx), float(cy), int(radius), out_n,
              out_s, min_rows=16)
@@ -195,8 +261,8 @@ def _choose_rows(v0, v1, z, fit_n, score, big_n, big_score, shift, gate, self_we
                 out[v, u, 2] = np.nan
                 continue
             if use_big and np.float64(big_score[v, u]) <= gate:
-                store_normal(out, v, u, np.float64(big_n[v, u, 0]), np.float64(big_n[v, u, 1]),
-                             np.float64(big_n[v, u, 2]), (u - cx) / fx, (v - cy) / fy, 1.0)
+                store_normal(out, v, u, np.float64(big_n[0, v, u]), np.float64(big_n[1, v, u]),
+                             np.float64(big_n[2, v, u]), (u - cx) / fx, (v - cy) / fy, 1.0)
                 continue
             s0 = np.float64(score[v, u])
             bv = v
@@ -218,8 +284,8 @@ def _choose_rows(v0, v1, z, fit_n, score, big_n, big_score, shift, gate, self_we
                 out[v, u, 1] = np.nan
                 out[v, u, 2] = np.nan
                 continue
-            store_normal(out, v, u, np.float64(fit_n[bv, bu, 0]), np.float64(fit_n[bv, bu, 1]),
-                         np.float64(fit_n[bv, bu, 2]), (u - cx) / fx, (v - cy) / fy, 1.0)
+            store_normal(out, v, u, np.float64(fit_n[0, bv, bu]), np.float64(fit_n[1, bv, bu]),
+                         np.float64(fit_n[2, bv, bu]), (u - cx) / fx, (v - cy) / fy, 1.0)
 
 
 def choose_windows(z: np.ndarray, fit_n: np.ndarray, score: np.ndarray, fx: float, fy: float,
@@ -235,7 +301,7 @@ def choose_windows(z: np.ndarray, fit_n: np.ndarray, score: np.ndarray, fx: floa
     ``self_weight`` first (it wins ties). Writes every pixel of ``out`` (H, W, 3) float32:
     NaN at invalid depth and where no window has a fit.
     """
-    big_n, big_s = big if big is not None else (fit_n[:1], score[:1])
+    big_n, big_s = big if big is not None else (fit_n[:, :1], score[:1])
     run_rows(_choose_rows, z.shape[0], z, fit_n, score, big_n, big_s, int(shift), float(gate),
              float(self_weight), float(fx), float(fy), float(cx), float(cy), out, min_rows=16)
 
@@ -246,7 +312,7 @@ def box_fit_from_prepared(z: np.ndarray, fx: float, fy: float, cx: float, cy: fl
     """:func:`box_fit_normals` on prepared depth."""
     fit_n, score = box_fit_windows(z, fx, fy, cx, cy, radius)
     big = box_fit_windows(z, fx, fy, cx, cy, big_radius) if big_radius > radius else None
-    out = np.empty_like(fit_n)
+    out = np.empty((z.shape[0], z.shape[1], 3), dtype=np.float32)
     choose_windows(z, fit_n, score, fx, fy, cx, cy, shift=shift, gate=gate,
                    self_weight=self_weight, out=out, big=big)
     return out
