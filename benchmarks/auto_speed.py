@@ -13,12 +13,11 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
+from targets import _measure_all  # benchmarks/, the script's folder
 
 import depthnormals as dn
 from depthnormals.analytic import make_scene
 from depthnormals.commands.bench import machine
-
-from targets import _measure_all  # noqa: I001  (benchmarks/ is the script's folder)
 
 
 def main() -> None:
@@ -47,10 +46,8 @@ def main() -> None:
                  ("3f2n+ (today's default)", lambda d=d: dn.estimate_normals(d, K)),
                  ("3f2n+[selection=auto]",
                   lambda d=d: dn.estimate_normals(d, K, selection="auto")),
-                 ("estimate_noise alone", lambda d=d: dn.estimate_noise(d, K)),
-                 ("3f2n+[selection=plane-fit]",
-                  lambda d=d: dn.estimate_normals(d, K, selection="plane-fit"))]
-        res = _measure_all([fn for _, fn in cases], args.repeats if level else args.repeats)
+                 ("estimate_noise alone", lambda d=d: dn.estimate_noise(d, K))]
+        res = _measure_all([fn for _, fn in cases], args.repeats)
         base = res[0][0]
         name = "clean" if not level else f"noise {level:g}"
         for (label, _), (cpu, _wall, _mn) in zip(cases, res, strict=True):

@@ -247,8 +247,8 @@ def box_fit_windows(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
 
 
 @nb.njit(**_JIT)
-def _choose_rows(v0, v1, z, fit_n, score, big_n, big_score, shift, gate, self_weight, fx, fy,
-                 cx, cy, out):
+def _choose_rows(v0, v1, z, fit_n, score, big_n, big_score, shift, gate, big_gate, self_weight,
+                 fx, fy, cx, cy, out):
     """Rows ``[v0, v1)`` of the window choice (see :func:`choose_windows`)."""
     h, w = z.shape
     use_big = big_score.shape[0] == h
@@ -260,7 +260,7 @@ def _choose_rows(v0, v1, z, fit_n, score, big_n, big_score, shift, gate, self_we
                 out[v, u, 1] = np.nan
                 out[v, u, 2] = np.nan
                 continue
-            if use_big and np.float64(big_score[v, u]) <= gate:
+            if use_big and np.float64(big_score[v, u]) <= big_gate:
                 store_normal(out, v, u, np.float64(big_n[0, v, u]), np.float64(big_n[1, v, u]),
                              np.float64(big_n[2, v, u]), (u - cx) / fx, (v - cy) / fy, 1.0)
                 continue
@@ -290,11 +290,16 @@ def _choose_rows(v0, v1, z, fit_n, score, big_n, big_score, shift, gate, self_we
 
 def choose_windows(z: np.ndarray, fit_n: np.ndarray, score: np.ndarray, fx: float, fy: float,
                    cx: float, cy: float, *, shift: int, gate: float, self_weight: float,
-                   out: np.ndarray, big: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+                   out: np.ndarray, big: tuple[np.ndarray, np.ndarray] | None = None,
+                   big_gate: float | None = None) -> None:
     """Every valid pixel takes the normal of the best of its nine windows (module doc).
 
+    ``fit_n`` (3, H, W) and ``score`` (H, W) are the centred-window fits of
+    :func:`box_fit_windows`.
+
     With ``big`` (the normals and scores of larger centred windows), a pixel whose large
-    window has a residual variance ``<= gate`` takes the large window's normal first.
+    window has a residual variance ``<= big_gate`` (default ``gate``) takes the large
+    window's normal first.
 
     The centred window is kept when its residual variance ``score`` is ``<= gate``; otherwise
     the window of least score among the nine wins, the centred one's score multiplied by
@@ -302,19 +307,20 @@ def choose_windows(z: np.ndarray, fit_n: np.ndarray, score: np.ndarray, fx: floa
     NaN at invalid depth and where no window has a fit.
     """
     big_n, big_s = big if big is not None else (fit_n[:, :1], score[:1])
+    bg = gate if big_gate is None else big_gate
     run_rows(_choose_rows, z.shape[0], z, fit_n, score, big_n, big_s, int(shift), float(gate),
-             float(self_weight), float(fx), float(fy), float(cx), float(cy), out, min_rows=16)
+             float(bg), float(self_weight), float(fx), float(fy), float(cx), float(cy), out, min_rows=16)
 
 
 def box_fit_from_prepared(z: np.ndarray, fx: float, fy: float, cx: float, cy: float, *,
                           radius: int, shift: int, gate: float, self_weight: float,
-                          big_radius: int = 0) -> np.ndarray:
+                          big_radius: int = 0, big_gate: float | None = None) -> np.ndarray:
     """:func:`box_fit_normals` on prepared depth."""
     fit_n, score = box_fit_windows(z, fx, fy, cx, cy, radius)
     big = box_fit_windows(z, fx, fy, cx, cy, big_radius) if big_radius > radius else None
     out = np.empty((z.shape[0], z.shape[1], 3), dtype=np.float32)
     choose_windows(z, fit_n, score, fx, fy, cx, cy, shift=shift, gate=gate,
-                   self_weight=self_weight, out=out, big=big)
+                   self_weight=self_weight, out=out, big=big, big_gate=big_gate)
     return out
 
 
