@@ -136,7 +136,8 @@ def box_select(z: np.ndarray, base: np.ndarray | None, fx: float, fy: float, cx:
     r = box_radius(sigma)
     gate = GATE * sigma * sigma if sigma == sigma else 0.0
     out = box_fit_from_prepared(z, fx, fy, cx, cy, radius=r, shift=r, gate=gate, self_weight=1.0,
-                                big_radius=max(BIG_RADIUS, r))
+                                big_radius=max(BIG_RADIUS, r),
+                                sigma=sigma if sigma == sigma and sigma > 0.0 else None)
     if base is not None:
         k2 = KEEP_CHI2 if keep_chi2 is None else float(keep_chi2)
         suu = (2 * r + 1) ** 2 * r * (r + 1) / 3.0

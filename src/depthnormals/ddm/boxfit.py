@@ -36,13 +36,17 @@ import numpy as np
 from .._parallel import run_rows
 from ..estimators._common import prepare, store_normal
 
-__all__ = ["SHIFTS", "box_fit_normals", "box_fit_windows", "choose_windows"]
+__all__ = ["LOCAL_CAP", "SHIFTS", "box_fit_normals", "box_fit_windows", "choose_windows"]
 
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
 # reassociation lets LLVM vectorise the sums; no-NaN flags are never allowed
 _FASTMATH = {"reassoc", "contract", "nsz", "arcp"}
 #: The fewest valid pixels a window needs (three parameters, a residual of >= 3 degrees).
 MIN_POINTS = 6
+
+#: Local choice: the squared residual of one pixel of the 3x3, in noise variances, counts at
+#: most this much (5 sigma: another surface costs the same whatever its distance).
+LOCAL_CAP = 25.0
 
 #: Window-centre offsets (dv, du) in units of the shift ``s``, the centred window first
 #: (it wins ties).
@@ -134,7 +138,8 @@ def solve_window(n, su, sv, suu, suv, svv, sw, suw, svw, sww):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", fastmath=_FASTMATH)
-def _solve_row(t0, t1m0, t1m1, t1w, t2m0, fx, fy, acol, bv, out_x, out_y, out_z, out_s):
+def _solve_row(t0, t1m0, t1m1, t1w, t2m0, fx, fy, acol, bv, out_x, out_y, out_z, out_s, out_p,
+               want_p):
     """Fits of one row from its window sums (``t0`` (6, W): the column sums of the six row
     sums; ``t1*``: the dv-weighted ones; ``t2m0``: sum dv^2): unit normals facing the camera
     into ``out_x, out_y, out_z`` (NaN: no fit), residual variances in footprints^2 into
@@ -159,10 +164,19 @@ def _solve_row(t0, t1m0, t1m1, t1w, t2m0, fx, fy, acol, bv, out_x, out_y, out_z,
         out_y[u] = ny * s if good else nan
         out_z[u] = nz * s if good else nan
         out_s[u] = rss / (n - 3.0) * zc * zc if good else inf
+    if want_p:
+        for u in range(acol.size):
+            n = t0[_R_N, u]
+            a, b, c, rss, ok = solve_window(n, t0[_R_U, u], t1m0[u], t0[_R_UU, u], t1m1[u],
+                                            t2m0[u], t0[_R_W, u], t0[_R_UW, u], t1w[u],
+                                            t0[_R_WW, u])
+            out_p[0, u] = a
+            out_p[1, u] = b
+            out_p[2, u] = c
 
 
 @nb.njit(**_JIT)
-def _fit_rows(v0, v1, z, fx, fy, cx, cy, r, out_n, out_score):
+def _fit_rows(v0, v1, z, fx, fy, cx, cy, r, out_n, out_score, out_plane, want_plane):
     """Rows ``[v0, v1)`` of the centred-window fits: ``out_n`` (3, H, W) float32 planar unit
     normals facing the camera (NaN: no fit), ``out_score`` (H, W) float32 residual variance
     ``RSS / (N - 3)`` in footprints^2 ``(fx / c)^2`` (inf: no fit).
@@ -229,21 +243,23 @@ def _fit_rows(v0, v1, z, fx, fy, cx, cy, r, out_n, out_score):
                 t0[_R_UW, u] += e[_R_UW, u] - lv[_R_UW, u]
                 t0[_R_WW, u] += e[_R_WW, u] - lv[_R_WW, u]
         _solve_row(t0, t1m0, t1m1, t1w, t2m0, fx, fy, acol, v - cy, out_n[0, v], out_n[1, v],
-                   out_n[2, v], out_score[v])
+                   out_n[2, v], out_score[v], out_plane[:, v if want_plane else 0], want_plane)
 
 
 def box_fit_windows(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
-                    radius: int) -> tuple[np.ndarray, np.ndarray]:
+                    radius: int, *, planes: bool = False) -> tuple[np.ndarray, ...]:
     """Centred-window fits of prepared depth ``z`` (NaN invalid): planar normals (3, H, W)
     float32 (NaN where a window has no fit) and residual variances (H, W) float32 in
     footprints^2 (inf there). A window needs :data:`MIN_POINTS` valid pixels, not the
-    centre's."""
+    centre's. With ``planes``, also the fitted ``(a, b, c)`` of every window, (3, H, W)
+    float64 (``w = a du + b dv + c`` around its centre)."""
     h, w = z.shape
     out_n = np.empty((3, h, w), dtype=np.float32)
     out_s = np.empty((h, w), dtype=np.float32)
+    out_p = np.empty((3, h, w) if planes else (3, 1, w))
     run_rows(_fit_rows, h, z, float(fx), float(fy), float(cx), float(cy), int(radius), out_n,
-             out_s, min_rows=16)
-    return out_n, out_s
+             out_s, out_p, planes, min_rows=16)
+    return (out_n, out_s, out_p) if planes else (out_n, out_s)
 
 
 @nb.njit(**_JIT)
@@ -288,6 +304,64 @@ def _choose_rows(v0, v1, z, fit_n, score, big_n, big_score, shift, gate, big_gat
                          np.float64(fit_n[2, bv, bu]), (u - cx) / fx, (v - cy) / fy, 1.0)
 
 
+@nb.njit(**_JIT)
+def _choose_local_rows(v0, v1, z, fit_n, score, plane, big_n, big_score, shift, gate, big_gate,
+                       inv_var, cap, fx, fy, cx, cy, out):
+    """Rows of :func:`choose_windows` with ``plane``: among the nine windows the one whose plane
+    explains the pixel's own 3x3 best (truncated squared residuals in noise units)."""
+    h, w = z.shape
+    for v in range(v0, v1):
+        for u in range(w):
+            zq = z[v, u]
+            if not (zq == zq):
+                out[v, u, 0] = np.nan
+                out[v, u, 1] = np.nan
+                out[v, u, 2] = np.nan
+                continue
+            if np.float64(big_score[v, u]) <= big_gate:
+                store_normal(out, v, u, np.float64(big_n[0, v, u]), np.float64(big_n[1, v, u]),
+                             np.float64(big_n[2, v, u]), (u - cx) / fx, (v - cy) / fy, 1.0)
+                continue
+            bv = v
+            bu = u
+            if not (np.float64(score[v, u]) <= gate):
+                best = np.inf
+                for k in range(SHIFTS.shape[0]):
+                    r = v + shift * SHIFTS[k, 0]
+                    c = u + shift * SHIFTS[k, 1]
+                    if r < 0 or r >= h or c < 0 or c >= w or not (score[r, c] < np.inf):
+                        continue
+                    pa = plane[0, r, c]
+                    pb = plane[1, r, c]
+                    pc = plane[2, r, c]
+                    sk = 0.0
+                    for dv in range(-1, 2):
+                        a = v + dv
+                        if a < 0 or a >= h:
+                            continue
+                        for du in range(-1, 2):
+                            b = u + du
+                            if b < 0 or b >= w:
+                                continue
+                            zp = np.float64(z[a, b])
+                            if not (zp == zp):
+                                continue
+                            res = (1.0 / zp - (pa * (b - c) + pb * (a - r) + pc)) * fx * zp
+                            e = res * res * inv_var
+                            sk += e if e < cap else cap
+                    if sk < best:
+                        best = sk
+                        bv = r
+                        bu = c
+                if not (best < np.inf):
+                    out[v, u, 0] = np.nan
+                    out[v, u, 1] = np.nan
+                    out[v, u, 2] = np.nan
+                    continue
+            store_normal(out, v, u, np.float64(fit_n[0, bv, bu]), np.float64(fit_n[1, bv, bu]),
+                         np.float64(fit_n[2, bv, bu]), (u - cx) / fx, (v - cy) / fy, 1.0)
+
+
 def choose_windows(z: np.ndarray, fit_n: np.ndarray, score: np.ndarray, fx: float, fy: float,
                    cx: float, cy: float, *, shift: int, gate: float, self_weight: float,
                    out: np.ndarray, big: tuple[np.ndarray, np.ndarray] | None = None,
@@ -314,11 +388,23 @@ def choose_windows(z: np.ndarray, fit_n: np.ndarray, score: np.ndarray, fx: floa
 
 def box_fit_from_prepared(z: np.ndarray, fx: float, fy: float, cx: float, cy: float, *,
                           radius: int, shift: int, gate: float, self_weight: float,
-                          big_radius: int = 0, big_gate: float | None = None) -> np.ndarray:
+                          big_radius: int = 0, big_gate: float | None = None,
+                          sigma: float | None = None) -> np.ndarray:
     """:func:`box_fit_normals` on prepared depth."""
+    out = np.empty((z.shape[0], z.shape[1], 3), dtype=np.float32)
+    if sigma is not None and sigma > 0.0:  # the local choice (needs the planes)
+        fit_n, score, plane = box_fit_windows(z, fx, fy, cx, cy, radius, planes=True)
+        if big_radius > radius:
+            big_n, big_s = box_fit_windows(z, fx, fy, cx, cy, big_radius)
+        else:
+            big_n, big_s = fit_n, np.full_like(score, np.inf)
+        bg = gate if big_gate is None else big_gate
+        run_rows(_choose_local_rows, z.shape[0], z, fit_n, score, plane, big_n, big_s, int(shift),
+                 float(gate), float(bg), 1.0 / (sigma * sigma), LOCAL_CAP, float(fx), float(fy),
+                 float(cx), float(cy), out, min_rows=16)
+        return out
     fit_n, score = box_fit_windows(z, fx, fy, cx, cy, radius)
     big = box_fit_windows(z, fx, fy, cx, cy, big_radius) if big_radius > radius else None
-    out = np.empty((z.shape[0], z.shape[1], 3), dtype=np.float32)
     choose_windows(z, fit_n, score, fx, fy, cx, cy, shift=shift, gate=gate,
                    self_weight=self_weight, out=out, big=big, big_gate=big_gate)
     return out
@@ -343,7 +429,7 @@ def _check_float(value: Any, name: str, lo: float, hi: float) -> float:
 
 def box_fit_normals(depth: Any, K: Any, *, radius: int = 2, shift: int | None = None,
                     gate: float = 0.0, self_weight: float = 1.0, big_radius: int = 0,
-                    depth_scale: float | None = None) -> np.ndarray:
+                    sigma: float | None = None, depth_scale: float | None = None) -> np.ndarray:
     """Normals from least-squares planes in inverse depth over box windows (module doc).
 
     Parameters
@@ -366,6 +452,12 @@ def box_fit_normals(depth: Any, K: Any, *, radius: int = 2, shift: int | None = 
         With ``big_radius > radius``: a pixel whose centred ``(2 big_radius + 1)^2`` window
         has a residual variance ``<= gate`` takes that window's normal (one plane within the
         noise: the larger support wins); 0: off.
+    sigma : float > 0, optional
+        Noise in footprints (:func:`depthnormals.estimate_noise`). Given, the nine windows
+        are ranked by how well their planes explain the pixel's own 3x3 neighbourhood (the
+        sum of squared residuals in units of ``sigma^2``, each capped at
+        :data:`LOCAL_CAP`) instead of by their own residual variance; ``self_weight`` is then
+        not used.
     depth_scale : float, optional
         Metres per unit of integer depth.
 
@@ -389,8 +481,11 @@ def box_fit_normals(depth: Any, K: Any, *, radius: int = 2, shift: int | None = 
     g = _check_float(gate, "gate", 0.0, np.inf)
     sw = _check_float(self_weight, "self_weight", 0.0, 1.0)
     big = _check_int(big_radius, "big_radius", 0, 16)
+    sg = None if sigma is None else _check_float(sigma, "sigma", 0.0, np.inf)
+    if sg == 0.0:
+        raise ValueError("sigma must be > 0 (or None)")
     if sw == 0.0:
         raise ValueError("self_weight must be > 0")
     z, cam = prepare(depth, K, depth_scale)
     return box_fit_from_prepared(z, cam.fx, cam.fy, cam.cx, cam.cy, radius=rad, shift=sh,
-                                 gate=g, self_weight=sw, big_radius=big)
+                                 gate=g, self_weight=sw, big_radius=big, sigma=sg)
