@@ -28,6 +28,7 @@ nine precomputed windows. Ours (issue 13); measured in docs/3f2n-plus.md.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numba as nb
@@ -138,12 +139,13 @@ def solve_window(n, su, sv, suu, suv, svv, sw, suw, svw, sww):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", fastmath=_FASTMATH)
-def _solve_row(t0, t1m0, t1m1, t1w, t2m0, fx, fy, acol, bv, out_x, out_y, out_z, out_s, out_p,
-               want_p):
+def _solve_row(t0, t1m0, t1m1, t1w, t2m0, fx, fy, acol, bv, out_x, out_y, out_z, out_s, out_a,
+               out_b, out_c):
     """Fits of one row from its window sums (``t0`` (6, W): the column sums of the six row
     sums; ``t1*``: the dv-weighted ones; ``t2m0``: sum dv^2): unit normals facing the camera
     into ``out_x, out_y, out_z`` (NaN: no fit), residual variances in footprints^2 into
-    ``out_s`` (inf: no fit). Branch-free, so it vectorises."""
+    ``out_s`` (inf: no fit), the plane ``(a, b, c)`` into ``out_a, out_b, out_c``.
+    Branch-free, so it vectorises."""
     nan = np.nan
     inf = np.inf
     ifx = 1.0 / fx
@@ -164,19 +166,13 @@ def _solve_row(t0, t1m0, t1m1, t1w, t2m0, fx, fy, acol, bv, out_x, out_y, out_z,
         out_y[u] = ny * s if good else nan
         out_z[u] = nz * s if good else nan
         out_s[u] = rss / (n - 3.0) * zc * zc if good else inf
-    if want_p:
-        for u in range(acol.size):
-            n = t0[_R_N, u]
-            a, b, c, rss, ok = solve_window(n, t0[_R_U, u], t1m0[u], t0[_R_UU, u], t1m1[u],
-                                            t2m0[u], t0[_R_W, u], t0[_R_UW, u], t1w[u],
-                                            t0[_R_WW, u])
-            out_p[0, u] = a
-            out_p[1, u] = b
-            out_p[2, u] = c
+        out_a[u] = a
+        out_b[u] = b
+        out_c[u] = c
 
 
 @nb.njit(**_JIT)
-def _fit_rows(v0, v1, z, fx, fy, cx, cy, r, out_n, out_score, out_plane, want_plane):
+def _fit_rows(v0, v1, z, fx, fy, cx, cy, r, out_n, out_score, out_plane, want_plane, want_n):
     """Rows ``[v0, v1)`` of the centred-window fits: ``out_n`` (3, H, W) float32 planar unit
     normals facing the camera (NaN: no fit), ``out_score`` (H, W) float32 residual variance
     ``RSS / (N - 3)`` in footprints^2 ``(fx / c)^2`` (inf: no fit).
@@ -197,6 +193,8 @@ def _fit_rows(v0, v1, z, fx, fy, cx, cy, r, out_n, out_score, out_plane, want_pl
     t1w = np.zeros(w)
     t2m0 = np.zeros(w)
     acol = np.arange(w) - cx
+    pl = out_plane if want_plane else np.empty((3, 1, w), dtype=np.float32)  # scratch
+    nn = out_n if want_n else np.empty((3, 1, w), dtype=np.float32)
     rf = np.float64(r)
     r1 = rf + 1.0
     nxt = max(v0 - r, 0)
@@ -242,23 +240,27 @@ def _fit_rows(v0, v1, z, fx, fy, cx, cy, r, out_n, out_score, out_plane, want_pl
                 t0[_R_UU, u] += e[_R_UU, u] - lv[_R_UU, u]
                 t0[_R_UW, u] += e[_R_UW, u] - lv[_R_UW, u]
                 t0[_R_WW, u] += e[_R_WW, u] - lv[_R_WW, u]
-        _solve_row(t0, t1m0, t1m1, t1w, t2m0, fx, fy, acol, v - cy, out_n[0, v], out_n[1, v],
-                   out_n[2, v], out_score[v], out_plane[:, v if want_plane else 0], want_plane)
+        vn = v if want_n else 0
+        _solve_row(t0, t1m0, t1m1, t1w, t2m0, fx, fy, acol, v - cy, nn[0, vn], nn[1, vn],
+                   nn[2, vn], out_score[v], pl[0, v if want_plane else 0], pl[1, v if want_plane else 0],
+                   pl[2, v if want_plane else 0])
 
 
 def box_fit_windows(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
-                    radius: int, *, planes: bool = False) -> tuple[np.ndarray, ...]:
+                    radius: int, *, planes: bool = False,
+                    normals: bool = True) -> tuple[np.ndarray, ...]:
     """Centred-window fits of prepared depth ``z`` (NaN invalid): planar normals (3, H, W)
     float32 (NaN where a window has no fit) and residual variances (H, W) float32 in
     footprints^2 (inf there). A window needs :data:`MIN_POINTS` valid pixels, not the
     centre's. With ``planes``, also the fitted ``(a, b, c)`` of every window, (3, H, W)
-    float64 (``w = a du + b dv + c`` around its centre)."""
+    float32 (``w = a du + b dv + c`` around its centre). ``normals=False`` leaves the normals
+    out (an empty (3, 1, W) array is returned in their place)."""
     h, w = z.shape
-    out_n = np.empty((3, h, w), dtype=np.float32)
+    out_n = np.empty((3, h, w) if normals else (3, 1, w), dtype=np.float32)
     out_s = np.empty((h, w), dtype=np.float32)
-    out_p = np.empty((3, h, w) if planes else (3, 1, w))
+    out_p = np.empty((3, h, w) if planes else (3, 1, w), dtype=np.float32)
     run_rows(_fit_rows, h, z, float(fx), float(fy), float(cx), float(cy), int(radius), out_n,
-             out_s, out_p, planes, min_rows=16)
+             out_s, out_p, planes, normals, min_rows=16)
     return (out_n, out_s, out_p) if planes else (out_n, out_s)
 
 
@@ -305,11 +307,16 @@ def _choose_rows(v0, v1, z, fit_n, score, big_n, big_score, shift, gate, big_gat
 
 
 @nb.njit(**_JIT)
-def _choose_local_rows(v0, v1, z, fit_n, score, plane, big_n, big_score, shift, gate, big_gate,
-                       inv_var, cap, fx, fy, cx, cy, out):
+def _choose_local_rows(v0, v1, z, score, plane, big_n, big_score, shift, gate, big_gate, inv_var,
+                       cap, fx, fy, cx, cy, out):
     """Rows of :func:`choose_windows` with ``plane``: among the nine windows the one whose plane
     explains the pixel's own 3x3 best (truncated squared residuals in noise units)."""
     h, w = z.shape
+    sd = math.sqrt(inv_var)
+    pw = np.empty(9)
+    ps = np.empty(9)
+    pu = np.empty(9)
+    pv = np.empty(9)
     for v in range(v0, v1):
         for u in range(w):
             zq = z[v, u]
@@ -325,30 +332,36 @@ def _choose_local_rows(v0, v1, z, fit_n, score, plane, big_n, big_score, shift, 
             bv = v
             bu = u
             if not (np.float64(score[v, u]) <= gate):
+                m = 0  # the valid pixels of the 3x3: inverse depth, footprint scale, position
+                for dv in range(-1, 2):
+                    a = v + dv
+                    if a < 0 or a >= h:
+                        continue
+                    for du in range(-1, 2):
+                        b = u + du
+                        if b < 0 or b >= w:
+                            continue
+                        zp = np.float64(z[a, b])
+                        if zp == zp:
+                            pw[m] = 1.0 / zp
+                            ps[m] = fx * zp * sd
+                            pu[m] = b
+                            pv[m] = a
+                            m += 1
                 best = np.inf
                 for k in range(SHIFTS.shape[0]):
                     r = v + shift * SHIFTS[k, 0]
                     c = u + shift * SHIFTS[k, 1]
                     if r < 0 or r >= h or c < 0 or c >= w or not (score[r, c] < np.inf):
                         continue
-                    pa = plane[0, r, c]
-                    pb = plane[1, r, c]
-                    pc = plane[2, r, c]
+                    pa = np.float64(plane[0, r, c])
+                    pb = np.float64(plane[1, r, c])
+                    pc = np.float64(plane[2, r, c]) - pa * c - pb * r
                     sk = 0.0
-                    for dv in range(-1, 2):
-                        a = v + dv
-                        if a < 0 or a >= h:
-                            continue
-                        for du in range(-1, 2):
-                            b = u + du
-                            if b < 0 or b >= w:
-                                continue
-                            zp = np.float64(z[a, b])
-                            if not (zp == zp):
-                                continue
-                            res = (1.0 / zp - (pa * (b - c) + pb * (a - r) + pc)) * fx * zp
-                            e = res * res * inv_var
-                            sk += e if e < cap else cap
+                    for i in range(m):
+                        res = (pw[i] - (pa * pu[i] + pb * pv[i] + pc)) * ps[i]
+                        e = res * res
+                        sk += e if e < cap else cap
                     if sk < best:
                         best = sk
                         bv = r
@@ -358,8 +371,16 @@ def _choose_local_rows(v0, v1, z, fit_n, score, plane, big_n, big_score, shift, 
                     out[v, u, 1] = np.nan
                     out[v, u, 2] = np.nan
                     continue
-            store_normal(out, v, u, np.float64(fit_n[0, bv, bu]), np.float64(fit_n[1, bv, bu]),
-                         np.float64(fit_n[2, bv, bu]), (u - cx) / fx, (v - cy) / fy, 1.0)
+            if not (score[bv, bu] < np.inf):
+                out[v, u, 0] = np.nan
+                out[v, u, 1] = np.nan
+                out[v, u, 2] = np.nan
+                continue
+            pa = np.float64(plane[0, bv, bu])
+            pb = np.float64(plane[1, bv, bu])
+            store_normal(out, v, u, fx * pa, fy * pb,
+                         np.float64(plane[2, bv, bu]) - pa * (bu - cx) - pb * (bv - cy),
+                         (u - cx) / fx, (v - cy) / fy, 1.0)
 
 
 def choose_windows(z: np.ndarray, fit_n: np.ndarray, score: np.ndarray, fx: float, fy: float,
@@ -393,13 +414,14 @@ def box_fit_from_prepared(z: np.ndarray, fx: float, fy: float, cx: float, cy: fl
     """:func:`box_fit_normals` on prepared depth."""
     out = np.empty((z.shape[0], z.shape[1], 3), dtype=np.float32)
     if sigma is not None and sigma > 0.0:  # the local choice (needs the planes)
-        fit_n, score, plane = box_fit_windows(z, fx, fy, cx, cy, radius, planes=True)
+        _, score, plane = box_fit_windows(z, fx, fy, cx, cy, radius, planes=True, normals=False)
         if big_radius > radius:
             big_n, big_s = box_fit_windows(z, fx, fy, cx, cy, big_radius)
         else:
-            big_n, big_s = fit_n, np.full_like(score, np.inf)
+            big_n = np.empty((3, z.shape[0], z.shape[1]), dtype=np.float32)
+            big_s = np.full_like(score, np.inf)
         bg = gate if big_gate is None else big_gate
-        run_rows(_choose_local_rows, z.shape[0], z, fit_n, score, plane, big_n, big_s, int(shift),
+        run_rows(_choose_local_rows, z.shape[0], z, score, plane, big_n, big_s, int(shift),
                  float(gate), float(bg), 1.0 / (sigma * sigma), LOCAL_CAP, float(fx), float(fy),
                  float(cx), float(cy), out, min_rows=16)
         return out
