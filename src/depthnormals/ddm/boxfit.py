@@ -317,17 +317,16 @@ def _choose_local_rows(v0, v1, z, score, plane, big_n, big_score, shift, gate, b
     ps = np.empty(9)
     pu = np.empty(9)
     pv = np.empty(9)
+    nan = np.nan
     for v in range(v0, v1):
+        for u in range(w):  # the large windows' normals (already facing the camera)
+            ok = z[v, u] == z[v, u]
+            out[v, u, 0] = big_n[0, v, u] if ok else nan
+            out[v, u, 1] = big_n[1, v, u] if ok else nan
+            out[v, u, 2] = big_n[2, v, u] if ok else nan
         for u in range(w):
             zq = z[v, u]
-            if not (zq == zq):
-                out[v, u, 0] = np.nan
-                out[v, u, 1] = np.nan
-                out[v, u, 2] = np.nan
-                continue
-            if np.float64(big_score[v, u]) <= big_gate:
-                store_normal(out, v, u, np.float64(big_n[0, v, u]), np.float64(big_n[1, v, u]),
-                             np.float64(big_n[2, v, u]), (u - cx) / fx, (v - cy) / fy, 1.0)
+            if not (zq == zq) or np.float64(big_score[v, u]) <= big_gate:
                 continue
             bv = v
             bu = u
