@@ -149,3 +149,62 @@ def test_box_fit_rejects_bad_options():
         box_fit_normals(z, K_SMALL, radius=2, shift=3)
     with pytest.raises(ValueError, match="gate"):
         box_fit_normals(z, K_SMALL, gate=-1.0)
+
+
+def _reference_local_choice(z, K, r, big, gate, sigma):
+    """Per-pixel numpy version of the box-fit's choice with a noise level (module doc)."""
+    fx, fy, cx, cy = K
+    nrm_s, s_s = _reference_fit(z, fx, fy, cx, cy, r)
+    nrm_b, s_b = _reference_fit(z, fx, fy, cx, cy, big)
+    h, w = z.shape
+    out = np.full((h, w, 3), np.nan)
+    for v in range(h):
+        for u in range(w):
+            if not np.isfinite(z[v, u]):
+                continue
+            if s_b[v, u] <= gate:
+                out[v, u] = nrm_b[:, v, u]
+                continue
+            best, pick = np.inf, (v, u)
+            if not s_s[v, u] <= gate:
+                for dv, du in ((0, 0), (-1, 0), (0, -1), (0, 1), (1, 0), (-1, -1), (-1, 1),
+                               (1, -1), (1, 1)):
+                    a, b = v + r * dv, u + r * du
+                    if not (0 <= a < h and 0 <= b < w and np.isfinite(s_s[a, b])):
+                        continue
+                    n = nrm_s[:, a, b]
+                    total = 0.0
+                    for p in range(max(v - 1, 0), min(v + 2, h)):
+                        for q in range(max(u - 1, 0), min(u + 2, w)):
+                            if np.isfinite(z[p, q]):
+                                ray_p = np.array([(q - cx) / fx, (p - cy) / fy, 1.0])
+                                ray_c = np.array([(b - cx) / fx, (a - cy) / fy, 1.0])
+                                # the window's plane, through its fitted point at its centre
+                                pred = (n @ ray_p) / (n @ ray_c) * _centre_w(z, a, b, r)
+                                res = (1.0 / z[p, q] - pred) * fx * z[p, q] / sigma
+                                total += min(res * res, 25.0)
+                    if total < best:
+                        best, pick = total, (a, b)
+            out[v, u] = nrm_s[:, pick[0], pick[1]]
+    return out
+
+
+def _centre_w(z, a, b, r):
+    """The fitted inverse depth at a window's centre (its intercept c)."""
+    h, w = z.shape
+    rows = [(du, dv, 1.0, 1.0 / z[a + dv, b + du]) for dv in range(-r, r + 1)
+            for du in range(-r, r + 1)
+            if 0 <= a + dv < h and 0 <= b + du < w and np.isfinite(z[a + dv, b + du])]
+    m = np.array(rows)
+    return np.linalg.lstsq(m[:, :3], m[:, 3], rcond=None)[0][2]
+
+
+def test_local_window_choice_equals_the_numpy_reference():
+    K = (40.0, 40.0, 21.5, 17.5)
+    r = box_on_floor().render(shape=(30, 40), K=K)
+    d = _noisy(r.depth, 40.0, 0.1, seed=2)
+    z, _ = prepare(d, K, None)
+    fast = box_fit_normals(d, K, radius=1, big_radius=3, gate=0.03, sigma=0.1)
+    ref = _reference_local_choice(z, K, 1, 3, 0.03, 0.1)
+    assert np.array_equal(np.isnan(fast), np.isnan(ref))
+    assert np.nanmax(np.abs(fast - ref)) < 1e-4

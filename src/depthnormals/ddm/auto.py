@@ -10,11 +10,14 @@ footprints ``z / f``) and picks the support from it:
   :func:`depthnormals.ddm.crf.inconsistency`, below ``GUARD_RATIO`` times the own normal's),
   and a pixel where the estimator abstained (NaN at valid depth) stays NaN;
 - **noisy depth**: the box-fit (:mod:`depthnormals.ddm.boxfit`): least-squares planes in
-  inverse depth over ``(2 r + 1)^2`` windows, each pixel taking the best of the nine windows
-  that contain it; ``r`` is the smallest radius whose fitted normal has a predicted standard
-  deviation ``sigma / sqrt(N r (r + 1) / 3)`` (fronto-parallel, full window) of at most
-  ``TARGET_STD`` radians, the centred window kept while its residual variance is within
-  ``GATE sigma^2``. Pixels where the estimator abstained stay NaN.
+  inverse depth; a pixel takes the ``(2 BIG_RADIUS + 1)^2`` centred window where its residual
+  variance is within ``GATE sigma^2`` (one plane within noise), and otherwise the best of the
+  nine ``(2 r + 1)^2`` windows that contain it, ranked by how well their planes explain the
+  pixel's own 3x3 (the centred one kept within ``GATE sigma^2``); ``r`` is the smallest
+  radius whose fitted normal has a predicted standard deviation
+  ``sigma / sqrt(N r (r + 1) / 3)`` (fronto-parallel, full window) of at most ``TARGET_STD``
+  radians. With another estimator's normals, its own normal is kept where it lies within the
+  fit's noise (``KEEP_CHI2``) and NaN where it abstained.
 
 ``"box-fit"`` is the second branch whatever the noise (the radius still follows the
 estimate, at least 1). Both are ours (issue 13); the constants were chosen by the

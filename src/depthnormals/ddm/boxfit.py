@@ -15,11 +15,17 @@ like a box filter; nothing loops over candidate normals.
 
 Edge awareness (Kuwahara-like): every pixel ``q`` then chooses among the windows that contain
 it - the window centred on ``q`` and the eight centred at ``q + s (i, j)``, ``i, j`` in
-``{-1, 0, 1}``, ``s <= r``, which hold ``q`` at an edge or corner - the one whose plane
-explains its points best: the least residual variance ``RSS / (N - 3)``, in footprints
-``(z / fx)^2``. The centred window (unbiased on curved surfaces) is kept outright while its
-residual is within ``gate`` (noise variance times a factor), and otherwise needs to be
-beaten by the factor ``self_weight``. The normal of the chosen window is the pixel's normal.
+``{-1, 0, 1}``, ``s <= r``, which hold ``q`` at an edge or corner. The centred window
+(unbiased on curved surfaces) is kept outright while its residual variance ``RSS / (N - 3)``
+(footprints^2, ``(z / fx)^2``) is within ``gate``. Otherwise, without a noise level, the
+window of least residual variance wins (the centred one's multiplied by ``self_weight``);
+with a noise level ``sigma`` (footprints), the window whose plane best explains the pixel's
+own 3x3 neighbourhood wins: the sum over its valid pixels of the squared residual of ``1/z``
+in units of ``sigma^2`` (footprints), each capped at :data:`LOCAL_CAP` (the plane-fit
+selection's criterion, over nine precomputed planes). Optionally a large centred window
+(``big_radius``) is taken first wherever its residual variance is within ``big_gate``: one
+plane within the noise, where the larger support wins. The normal of the chosen window is
+the pixel's normal.
 
 This is FALS's estimate in another parametrisation (FALS fits ``1 / r`` over unit rays) with
 the window choice of the plane-fit selection (:mod:`depthnormals.ddm.planefit`) reduced to
