@@ -4,11 +4,11 @@
 footprints ``z / f``) and picks the support from it:
 
 - **clean depth** (``sigma < NOISE_CLEAN``): the curvature selection of the paper (stage 1
-  of :func:`depthnormals.discontinuity_discrimination` with its other options), followed by
-  the *self-wins guard*: a pixel keeps its estimator's own normal unless the selected one
-  fits the pixel's one-sided neighbourhood clearly better (its tangent inconsistency ``S``,
-  :func:`depthnormals.ddm.crf.inconsistency`, below ``GUARD_RATIO`` times the own normal's),
-  and a pixel where the estimator abstained (NaN at valid depth) stays NaN;
+  of :func:`depthnormals.discontinuity_discrimination` with its other options) with the
+  consistency margin ``AUTO_CONSISTENCY`` (0): a neighbour's normal replaces the pixel's own
+  only where its one-sided tangent inconsistency (:func:`depthnormals.ddm.crf.inconsistency`)
+  is strictly smaller ("self wins unless beaten"); a pixel where the estimator abstained (NaN
+  at valid depth) stays NaN;
 - **noisy depth**: the box-fit (:mod:`depthnormals.ddm.boxfit`): least-squares planes in
   inverse depth; a pixel takes the ``(2 BIG_RADIUS + 1)^2`` centred window where its residual
   variance is within ``GATE sigma^2`` (one plane within noise), and otherwise the best of the
@@ -148,11 +148,6 @@ def box_select(z: np.ndarray, base: np.ndarray | None, fx: float, fy: float, cx:
         run_rows(_keep_rows, z.shape[0], z, base, kappa, float(fx), float(fy), float(cx),
                  float(cy), out)
     return out
-
-
-def noise_level(z: np.ndarray, fx: float, fy: float) -> float:
-    """The image's noise (footprints) as ``"auto"`` reads it."""
-    return noise_from_prepared(z, fx, fy)
 
 
 def refine_auto(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
