@@ -154,7 +154,8 @@ def test_module_twin(rough):
     ({"method": "3f2n+", "crf": True, "curvature": "none"}, ValueError, "curvature"),
     ({"method": "3f2n+", "self_weight": 0.0}, ValueError, "self_weight"),
     ({"method": "3f2n+", "crf": 1}, TypeError, "crf"),
-    ({"method": "3f2n+", "iterations": 0}, ValueError, "iterations"),
+    ({"method": "3f2n+", "crf_iterations": 0}, ValueError, "crf_iterations"),
+    ({"method": "3f2n+", "iterations": 2}, TypeError, "crf_iterations"),
     ({"method": "3f2n", "invalid": "none"}, ValueError, "invalid"),
     ({"method": "3f2n", "depth_scale": -1.0}, ValueError, "depth_scale"),
 ])

@@ -144,7 +144,7 @@ MODULE_OPTIONS = [
     {"correlation": "kendall", "crf": True}, {"crf": True}, {"correlation": "kendall-prose", "crf": True},
     {"correlation": "pearson", "crf": True},
     {"correlation": "kendall", "crf": True, "neighbourhood": "square"},
-    {"correlation": "kendall", "crf": True, "iterations": 3}, {"crf": True, "lambda_": 0.5, "sigma": 0.5},
+    {"correlation": "kendall", "crf": True, "crf_iterations": 3}, {"crf": True, "lambda_": 0.5, "sigma": 0.5},
     {"aggregate": "mean"}, {"kernel": "sobel"},
 ]
 

@@ -16,7 +16,10 @@ from __future__ import annotations
 from . import datasets, io
 from ._parallel import get_num_threads, set_num_threads
 from .camera import Intrinsics, as_intrinsics, backproject
-from .ddm import discontinuity_discrimination
+from .ddm import (
+    discontinuity_discrimination,
+    estimate_noise,
+)
 from .estimators import (
     angle_weighted,
     area_weighted,
@@ -52,6 +55,7 @@ __all__ = [
     "d2nt",
     "datasets",
     "discontinuity_discrimination",
+    "estimate_noise",
     "estimate_normals",
     "fals",
     "get_estimator",

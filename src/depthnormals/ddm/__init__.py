@@ -13,8 +13,10 @@ from ._module import (
     module_defaults,
     renamed_option_error,
 )
+from .boxfit import box_fit_normals
 from .correlation import CORRELATIONS, kendall_map
 from .curvature import CURVATURES, DERIVATIVES, depth_curvature
+from .noise import estimate_noise
 from .threefn_plus import fused_plus
 
 __all__ = [
@@ -24,8 +26,10 @@ __all__ = [
     "NEIGHBOURHOODS",
     "RENAMED",
     "ModuleOptions",
+    "box_fit_normals",
     "depth_curvature",
     "discontinuity_discrimination",
+    "estimate_noise",
     "fused_plus",
     "kendall_map",
     "module_defaults",

@@ -11,6 +11,7 @@ import numpy as np
 
 from .._validate import check_choice, check_normals
 from ..kernels.depth import prepare, row_dtype
+from .auto import refine_auto
 from .correlation import CORRELATIONS, kendall_map
 from .crf import crf_step
 from .curvature import CURVATURES, DERIVATIVES, FOOTPRINTS, SLOPES, curvature_map
@@ -24,7 +25,7 @@ NEIGHBOURHOODS = ("square", "cross")
 _CURV = (*CURVATURES, "none")
 
 
-SELECTIONS = ("curvature", "plane-fit")
+SELECTIONS = ("curvature", "plane-fit", "box-fit", "auto")
 
 #: Module options renamed so that no "+" form has two options of one name: old -> new.
 RENAMED = {"iterations": "crf_iterations"}
@@ -275,6 +276,9 @@ def _refine(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
             o: dict[str, Any]) -> np.ndarray:
     """The three stages on prepared depth (as ``row_dtype`` gives it); ``n0``/``k`` given:
     stage 1 already done."""
+    if n0 is None and o["selection"] in ("auto", "box-fit"):  # noise-aware (ddm/auto.py)
+        return refine_auto(z, fx, fy, cx, cy, n_in, o,
+                           lambda oc: _refine(z, fx, fy, cx, cy, n_in, None, None, oc))
     curvature, correlation, crf = o["curvature"], o["correlation"], o["crf"]
     offs = CROSS if o["neighbourhood"] == "cross" else SQUARE
     if n0 is None:

@@ -27,6 +27,7 @@ from .._parallel import run_rows
 from ..kernels.depth import Pinhole, prepare, row_dtype
 from ..kernels.threefn_rows import NEIGHBOURS8, Filters, RowScratch, row_normals, row_setup
 from ._module import _SIM_MODES, ModuleOptions, _refine
+from .auto import auto_fused
 from .crf_ring import crf_flush, crf_ring_row, ring_slots, scratch, sim_coefficients, similarity_ring_row
 from .curvature import mean_max_row, row_constants
 from .selection import select_ring_row
@@ -201,6 +202,8 @@ def fused_plus(depth: Any, K: Any, depth_scale: float | None, estimator_options:
             and ks == 3 and _is_str(agg, "median", "mean")):
         return None
     o = ModuleOptions(**module_options).normalised()
+    if o["selection"] in ("auto", "box-fit"):  # noise-aware: box-fit under noise (ddm/auto.py)
+        return auto_fused(fused_plus, depth, K, depth_scale, estimator_options, module_options, o)
     if not (o["curvature"] in ("mean", "max") and o["derivatives"] == "inverse-depth"
             and o["slope"] == "min" and o["footprint"] == "pixel"
             and o["selection"] == "curvature" and o["neighbourhood"] == "cross"):

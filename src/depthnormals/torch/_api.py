@@ -25,9 +25,9 @@ _CHOICES = {
     "curvature": _CURVATURES, "correlation": ("kendall", "kendall-prose", "pearson", "none"),
     "derivatives": ("inverse-depth", "depth"), "slope": ("min", "central"),
     "footprint": ("pixel", "neighbours"), "neighbourhood": ("square", "cross"),
-    "selection": ("curvature", "plane-fit"),
+    "selection": ("curvature", "plane-fit", "box-fit", "auto"),
 }
-_MODULE_OPTIONS = ("curvature", "correlation", "crf", "sigma", "lambda_", "iterations",
+_MODULE_OPTIONS = ("curvature", "correlation", "crf", "sigma", "lambda_", "crf_iterations",
                    "neighbourhood", "derivatives", "slope", "footprint", "selection", "fit_radius",
                    "self_weight", "consistency")
 
@@ -102,6 +102,13 @@ def _check_options(method: str, options: dict[str, Any]) -> dict[str, Any]:
     """Options of ``method`` merged over its defaults, validated and normalised."""
     defaults = method_defaults(method)
     unknown = sorted(set(options) - set(defaults))
+    if method.endswith("+"):
+        from depthnormals.ddm import renamed_option_error
+
+        for name in unknown:
+            err = renamed_option_error(name, f"method {method!r}")
+            if err is not None:
+                raise err
     if unknown:
         raise TypeError(f"method {method!r} got unknown option(s) {unknown}; valid options: "
                         f"{', '.join(sorted(defaults)) or '(none)'}, depth_scale, invalid")
@@ -137,7 +144,7 @@ def _check_module(o: dict[str, Any]) -> None:
         raise TypeError(f"crf must be True or False; got {o['crf']!r}")
     o["sigma"] = _real(o["sigma"], "sigma", 0.0)
     o["lam"] = _real(o.pop("lambda_"), "lambda_", 0.0)
-    o["iterations"] = _integer(o["iterations"], "iterations", 1, 10**6)
+    o["iterations"] = _integer(o.pop("crf_iterations"), "crf_iterations", 1, 10**6)
     o["fit_radius"] = _integer(o["fit_radius"], "fit_radius", 1, 3)
     sw = _real(o["self_weight"], "self_weight", 0.0)
     if not 0.0 < sw <= 1.0:
@@ -150,8 +157,8 @@ def _check_module(o: dict[str, Any]) -> None:
                          "other than 'none', or crf=False for a correlation-only selection")
     if o["selection"] != "curvature":
         raise ValueError(f"selection={o['selection']!r} is not implemented in depthnormals.torch "
-                         "(only 'curvature'); use depthnormals.estimate_normals for the plane-fit "
-                         "selection")
+                         "(only 'curvature'); use depthnormals.estimate_normals for the plane-fit, "
+                         "box-fit and noise-aware 'auto' selections")
 
 
 def _pad(base: str, o: dict[str, Any], refined: bool) -> int:

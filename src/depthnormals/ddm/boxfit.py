@@ -1,0 +1,519 @@
+"""Box-fit: least-squares planes in inverse depth over box windows, at box-filter cost.
+
+A plane ``n . X = d`` seen by a pinhole camera makes inverse depth exactly linear in the
+pixel coordinates (NOTES section 2, 3F2N):
+
+    w = 1 / z = a (u - u_c) + b (v - v_c) + c,   n ~ (fx a, fy b, c - a (u_c - cx) - b (v_c - cy))
+
+(``(u_c, v_c)`` any reference pixel, here the window centre; the sign is then turned toward
+the camera). So an ordinary least-squares fit of ``(a, b, c)`` to the valid pixels of a
+``(2 r + 1)^2`` window gives the plane's normal from ten sums - ``1, du, dv, du^2, du dv,
+dv^2, w, du w, dv w, w^2`` with ``du, dv`` window-local - and the residual sum of squares
+``RSS = sum w^2 - (a sum du w + b sum dv w + c sum w)`` from the same sums. The sums are
+separable: a row pass (six sums over ``du``) and a column pass (ten over ``dv``) per pixel,
+like a box filter; nothing loops over candidate normals.
+
+Edge awareness (Kuwahara-like): every pixel ``q`` then chooses among the windows that contain
+it - the window centred on ``q`` and the eight centred at ``q + s (i, j)``, ``i, j`` in
+``{-1, 0, 1}``, ``s <= r``, which hold ``q`` at an edge or corner. The centred window
+(unbiased on curved surfaces) is kept outright while its residual variance ``RSS / (N - 3)``
+(footprints^2, ``(z / fx)^2``) is within ``gate``. Otherwise, without a noise level, the
+window of least residual variance wins (the centred one's multiplied by ``self_weight``);
+with a noise level ``sigma`` (footprints), the window whose plane best explains the pixel's
+own 3x3 neighbourhood wins: the sum over its valid pixels of the squared residual of ``1/z``
+in units of ``sigma^2`` (footprints), each capped at :data:`LOCAL_CAP` (the plane-fit
+selection's criterion, over nine precomputed planes). Optionally a large centred window
+(``big_radius``) is taken first wherever its residual variance is within ``big_gate``: one
+plane within the noise, where the larger support wins. The normal of the chosen window is
+the pixel's normal.
+
+This is FALS's estimate in another parametrisation (FALS fits ``1 / r`` over unit rays) with
+the window choice of the plane-fit selection (:mod:`depthnormals.ddm.planefit`) reduced to
+nine precomputed windows. Ours (issue 13); measured in docs/3f2n-plus.md.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numba as nb
+import numpy as np
+
+from .._parallel import run_rows
+from ..kernels.depth import prepare
+from ..kernels.orient import store_normal
+
+__all__ = ["LOCAL_CAP", "SHIFTS", "box_fit_normals", "box_fit_windows", "choose_windows"]
+
+_JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
+# reassociation lets LLVM vectorise the sums; no-NaN flags are never allowed
+_FASTMATH = {"reassoc", "contract", "nsz", "arcp"}
+#: The fewest valid pixels a window needs (three parameters, a residual of >= 3 degrees).
+MIN_POINTS = 6
+
+#: Local choice: the squared residual of one pixel of the 3x3, in noise variances, counts at
+#: most this much (5 sigma: another surface costs the same whatever its distance).
+LOCAL_CAP = 25.0
+
+#: Window-centre offsets (dv, du) in units of the shift ``s``, the centred window first
+#: (it wins ties).
+SHIFTS = np.array([[0, 0], [-1, 0], [0, -1], [0, 1], [1, 0], [-1, -1], [-1, 1], [1, -1],
+                   [1, 1]], dtype=np.int64)
+
+# Row sums (index of the first axis of a ring slot), over the valid pixels of the row
+# segment u - r .. u + r: count, sum du, sum du^2, sum w, sum du w, sum w^2.
+_R_N, _R_U, _R_UU, _R_W, _R_UW, _R_WW = range(6)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", fastmath=_FASTMATH)
+def _row_sums(zrow, r, xm, xw, out_rs):
+    """The six row sums of one depth row (``zrow``, NaN invalid) for half-width ``r``, as
+    running sums: O(1) per pixel whatever ``r``. ``xm``, ``xw`` (W + 2 r + 2) scratch whose
+    border cells stay 0 (pixel u at index u + r + 1); writes ``out_rs`` (6, W).
+
+    Moving the window from u to u + 1 (entering value e, leaving value l, sums over the
+    local offsets k of ``x``, ``k x``, ``k^2 x``): ``T0' = T0 + e - l``,
+    ``T1' = T1 + r l + (r + 1) e - T0'``,
+    ``T2' = T2 - r^2 l + (r + 1)^2 e - 2 (T1 + r l + (r + 1) e) + T0'``.
+    """
+    w = zrow.size
+    o = r + 1
+    for u in range(w):
+        zz = np.float64(zrow[u])
+        ok = zz == zz
+        xw[u + o] = 1.0 / zz if ok else 0.0
+        xm[u + o] = 1.0 if ok else 0.0
+    t0m = 0.0
+    t1m = 0.0
+    t2m = 0.0
+    t0w = 0.0
+    t1w = 0.0
+    t0q = 0.0
+    for k in range(-r, r + 1):
+        m = xm[k + o]
+        x = xw[k + o]
+        t0m += m
+        t1m += k * m
+        t2m += k * k * m
+        t0w += x
+        t1w += k * x
+        t0q += x * x
+    rf = np.float64(r)
+    r1 = rf + 1.0
+    for u in range(w):
+        if u > 0:
+            em = xm[u + 2 * r + 1]
+            lm = xm[u]
+            ew = xw[u + 2 * r + 1]
+            lw = xw[u]
+            n0 = t0m + em - lm
+            s1 = t1m + rf * lm + r1 * em
+            t2m = t2m - rf * rf * lm + r1 * r1 * em - 2.0 * s1 + n0
+            t1m = s1 - n0
+            t0m = n0
+            n0 = t0w + ew - lw
+            t1w = t1w + rf * lw + r1 * ew - n0
+            t0w = n0
+            t0q = t0q + ew * ew - lw * lw
+        out_rs[_R_N, u] = t0m
+        out_rs[_R_U, u] = t1m
+        out_rs[_R_UU, u] = t2m
+        out_rs[_R_W, u] = t0w
+        out_rs[_R_UW, u] = t1w
+        out_rs[_R_WW, u] = t0q
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def solve_window(n, su, sv, suu, suv, svv, sw, suw, svw, sww):
+    """Least squares ``w = a du + b dv + c`` from the ten sums: (a, b, c, RSS, ok), ``ok``
+    False where the window has fewer than :data:`MIN_POINTS` points or is degenerate
+    (collinear); branch-free (the values are then meaningless)."""
+    c00 = svv * n - sv * sv
+    c01 = sv * su - suv * n
+    c02 = suv * sv - svv * su
+    c11 = suu * n - su * su
+    c12 = su * suv - suu * sv
+    c22 = suu * svv - suv * suv
+    det = suu * c00 + suv * c01 + su * c02
+    ok = (n >= MIN_POINTS) & (det > 1e-9 * n * n * n)
+    inv = 1.0 / (det if ok else 1.0)
+    a = (c00 * suw + c01 * svw + c02 * sw) * inv
+    b = (c01 * suw + c11 * svw + c12 * sw) * inv
+    c = (c02 * suw + c12 * svw + c22 * sw) * inv
+    rss = sww - (a * suw + b * svw + c * sw)
+    return a, b, c, (rss if rss > 0.0 else 0.0), ok
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", fastmath=_FASTMATH)
+def _solve_row(t0, t1m0, t1m1, t1w, t2m0, fx, fy, acol, bv, out_x, out_y, out_z, out_s, out_a,
+               out_b, out_c):
+    """Fits of one row from its window sums (``t0`` (6, W): the column sums of the six row
+    sums; ``t1*``: the dv-weighted ones; ``t2m0``: sum dv^2): unit normals facing the camera
+    into ``out_x, out_y, out_z`` (NaN: no fit), residual variances in footprints^2 into
+    ``out_s`` (inf: no fit), the plane ``(a, b, c)`` into ``out_a, out_b, out_c``.
+    Branch-free, so it vectorises."""
+    nan = np.nan
+    inf = np.inf
+    ifx = 1.0 / fx
+    ify = 1.0 / fy
+    for u in range(acol.size):
+        n = t0[_R_N, u]
+        a, b, c, rss, ok = solve_window(n, t0[_R_U, u], t1m0[u], t0[_R_UU, u], t1m1[u], t2m0[u],
+                                        t0[_R_W, u], t0[_R_UW, u], t1w[u], t0[_R_WW, u])
+        au = acol[u]
+        nx = fx * a
+        ny = fy * b
+        nz = c - a * au - b * bv
+        good = ok & (c > 0.0)
+        s = 1.0 / np.sqrt(nx * nx + ny * ny + nz * nz)
+        s = -s if nx * au * ifx + ny * bv * ify + nz > 0.0 else s
+        zc = fx / c
+        out_x[u] = nx * s if good else nan
+        out_y[u] = ny * s if good else nan
+        out_z[u] = nz * s if good else nan
+        out_s[u] = rss / (n - 3.0) * zc * zc if good else inf
+        out_a[u] = a
+        out_b[u] = b
+        out_c[u] = c
+
+
+@nb.njit(**_JIT)
+def _fit_rows(v0, v1, z, fx, fy, cx, cy, r, out_n, out_score, out_plane, want_plane, want_n):
+    """Rows ``[v0, v1)`` of the centred-window fits: ``out_n`` (3, H, W) float32 planar unit
+    normals facing the camera (NaN: no fit), ``out_score`` (H, W) float32 residual variance
+    ``RSS / (N - 3)`` in footprints^2 ``(fx / c)^2`` (inf: no fit).
+
+    Row sums (:func:`_row_sums`) go into a ring of ``2 r + 2`` rows; the column sums are
+    running sums down the band with the recurrences of :func:`_row_sums` (``dv`` for ``du``),
+    started directly at ``v0``: O(1) per pixel whatever ``r``.
+    """
+    h, w = z.shape
+    span = 2 * r + 2
+    ring = np.zeros((span, 6, w))
+    zero = np.zeros((6, w))
+    xm = np.zeros(w + 2 * r + 2)
+    xw = np.zeros(w + 2 * r + 2)
+    t0 = np.zeros((6, w))
+    t1m0 = np.zeros(w)
+    t1m1 = np.zeros(w)
+    t1w = np.zeros(w)
+    t2m0 = np.zeros(w)
+    acol = np.arange(w) - cx
+    pl = out_plane if want_plane else np.empty((3, 1, w), dtype=np.float32)  # scratch
+    nn = out_n if want_n else np.empty((3, 1, w), dtype=np.float32)
+    rf = np.float64(r)
+    r1 = rf + 1.0
+    nxt = max(v0 - r, 0)
+    for v in range(v0, v1):
+        while nxt <= min(v + r, h - 1):
+            _row_sums(z[nxt], r, xm, xw, ring[nxt % span])
+            nxt += 1
+        if v == v0:  # direct sums over dv = -r .. r
+            for dv in range(-r, r + 1):
+                row = v + dv
+                if row < 0 or row >= h:
+                    continue
+                rs = ring[row % span]
+                k = np.float64(dv)
+                for u in range(w):
+                    for j in range(6):
+                        t0[j, u] += rs[j, u]
+                    t1m0[u] += k * rs[_R_N, u]
+                    t1m1[u] += k * rs[_R_U, u]
+                    t1w[u] += k * rs[_R_W, u]
+                    t2m0[u] += k * k * rs[_R_N, u]
+        else:  # running: row v + r enters, row v - r - 1 leaves
+            e = ring[(v + r) % span] if v + r < h else zero
+            lv = ring[(v - r - 1) % span] if v - r - 1 >= 0 else zero
+            for u in range(w):
+                em = e[_R_N, u]
+                lm = lv[_R_N, u]
+                n0 = t0[_R_N, u] + em - lm
+                s1 = t1m0[u] + rf * lm + r1 * em
+                t2m0[u] = t2m0[u] - rf * rf * lm + r1 * r1 * em - 2.0 * s1 + n0
+                t1m0[u] = s1 - n0
+                t0[_R_N, u] = n0
+                eu = e[_R_U, u]
+                lu = lv[_R_U, u]
+                n0 = t0[_R_U, u] + eu - lu
+                t1m1[u] = t1m1[u] + rf * lu + r1 * eu - n0
+                t0[_R_U, u] = n0
+                ew = e[_R_W, u]
+                lw = lv[_R_W, u]
+                n0 = t0[_R_W, u] + ew - lw
+                t1w[u] = t1w[u] + rf * lw + r1 * ew - n0
+                t0[_R_W, u] = n0
+                t0[_R_UU, u] += e[_R_UU, u] - lv[_R_UU, u]
+                t0[_R_UW, u] += e[_R_UW, u] - lv[_R_UW, u]
+                t0[_R_WW, u] += e[_R_WW, u] - lv[_R_WW, u]
+        vn = v if want_n else 0
+        _solve_row(t0, t1m0, t1m1, t1w, t2m0, fx, fy, acol, v - cy, nn[0, vn], nn[1, vn],
+                   nn[2, vn], out_score[v], pl[0, v if want_plane else 0], pl[1, v if want_plane else 0],
+                   pl[2, v if want_plane else 0])
+
+
+def box_fit_windows(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
+                    radius: int, *, planes: bool = False,
+                    normals: bool = True) -> tuple[np.ndarray, ...]:
+    """Centred-window fits of prepared depth ``z`` (NaN invalid): planar normals (3, H, W)
+    float32 (NaN where a window has no fit) and residual variances (H, W) float32 in
+    footprints^2 (inf there). A window needs :data:`MIN_POINTS` valid pixels, not the
+    centre's. With ``planes``, also the fitted ``(a, b, c)`` of every window, (3, H, W)
+    float32 (``w = a du + b dv + c`` around its centre). ``normals=False`` leaves the normals
+    out (an empty (3, 1, W) array is returned in their place)."""
+    h, w = z.shape
+    out_n = np.empty((3, h, w) if normals else (3, 1, w), dtype=np.float32)
+    out_s = np.empty((h, w), dtype=np.float32)
+    out_p = np.empty((3, h, w) if planes else (3, 1, w), dtype=np.float32)
+    run_rows(_fit_rows, h, z, float(fx), float(fy), float(cx), float(cy), int(radius), out_n,
+             out_s, out_p, planes, normals, min_rows=16)
+    return (out_n, out_s, out_p) if planes else (out_n, out_s)
+
+
+@nb.njit(**_JIT)
+def _choose_rows(v0, v1, z, fit_n, score, big_n, big_score, shift, gate, big_gate, self_weight,
+                 fx, fy, cx, cy, out):
+    """Rows ``[v0, v1)`` of the window choice (see :func:`choose_windows`)."""
+    h, w = z.shape
+    use_big = big_score.shape[0] == h
+    for v in range(v0, v1):
+        for u in range(w):
+            zq = z[v, u]
+            if not (zq == zq):
+                out[v, u, 0] = np.nan
+                out[v, u, 1] = np.nan
+                out[v, u, 2] = np.nan
+                continue
+            if use_big and np.float64(big_score[v, u]) <= big_gate:
+                store_normal(out, v, u, np.float64(big_n[0, v, u]), np.float64(big_n[1, v, u]),
+                             np.float64(big_n[2, v, u]), (u - cx) / fx, (v - cy) / fy, 1.0)
+                continue
+            s0 = np.float64(score[v, u])
+            bv = v
+            bu = u
+            best = s0 * self_weight
+            if not (s0 <= gate):
+                for k in range(1, SHIFTS.shape[0]):
+                    r = v + shift * SHIFTS[k, 0]
+                    c = u + shift * SHIFTS[k, 1]
+                    if r < 0 or r >= h or c < 0 or c >= w:
+                        continue
+                    sk = np.float64(score[r, c])
+                    if sk < best:
+                        best = sk
+                        bv = r
+                        bu = c
+            if not (best < np.inf):
+                out[v, u, 0] = np.nan
+                out[v, u, 1] = np.nan
+                out[v, u, 2] = np.nan
+                continue
+            store_normal(out, v, u, np.float64(fit_n[0, bv, bu]), np.float64(fit_n[1, bv, bu]),
+                         np.float64(fit_n[2, bv, bu]), (u - cx) / fx, (v - cy) / fy, 1.0)
+
+
+@nb.njit(**_JIT)
+def _choose_local_rows(v0, v1, z, score, plane, big_n, big_score, shift, gate, big_gate, inv_var,
+                       cap, fx, fy, cx, cy, out):
+    """Rows of :func:`choose_windows` with ``plane``: among the nine windows the one whose plane
+    explains the pixel's own 3x3 best (truncated squared residuals in noise units)."""
+    h, w = z.shape
+    sd = math.sqrt(inv_var)
+    pw = np.empty(9)
+    ps = np.empty(9)
+    pu = np.empty(9)
+    pv = np.empty(9)
+    nan = np.nan
+    for v in range(v0, v1):
+        for u in range(w):  # the large windows' normals (already facing the camera)
+            ok = z[v, u] == z[v, u]
+            out[v, u, 0] = big_n[0, v, u] if ok else nan
+            out[v, u, 1] = big_n[1, v, u] if ok else nan
+            out[v, u, 2] = big_n[2, v, u] if ok else nan
+        for u in range(w):
+            zq = z[v, u]
+            if not (zq == zq) or np.float64(big_score[v, u]) <= big_gate:
+                continue
+            bv = v
+            bu = u
+            if not (np.float64(score[v, u]) <= gate):
+                m = 0  # the valid pixels of the 3x3: inverse depth, footprint scale, position
+                for dv in range(-1, 2):
+                    a = v + dv
+                    if a < 0 or a >= h:
+                        continue
+                    for du in range(-1, 2):
+                        b = u + du
+                        if b < 0 or b >= w:
+                            continue
+                        zp = np.float64(z[a, b])
+                        if zp == zp:
+                            pw[m] = 1.0 / zp
+                            ps[m] = fx * zp * sd
+                            pu[m] = b
+                            pv[m] = a
+                            m += 1
+                best = np.inf
+                for k in range(SHIFTS.shape[0]):
+                    r = v + shift * SHIFTS[k, 0]
+                    c = u + shift * SHIFTS[k, 1]
+                    if r < 0 or r >= h or c < 0 or c >= w or not (score[r, c] < np.inf):
+                        continue
+                    pa = np.float64(plane[0, r, c])
+                    pb = np.float64(plane[1, r, c])
+                    pc = np.float64(plane[2, r, c]) - pa * c - pb * r
+                    sk = 0.0
+                    for i in range(m):
+                        res = (pw[i] - (pa * pu[i] + pb * pv[i] + pc)) * ps[i]
+                        e = res * res
+                        sk += e if e < cap else cap
+                    if sk < best:
+                        best = sk
+                        bv = r
+                        bu = c
+                if not (best < np.inf):
+                    out[v, u, 0] = np.nan
+                    out[v, u, 1] = np.nan
+                    out[v, u, 2] = np.nan
+                    continue
+            if not (score[bv, bu] < np.inf):
+                out[v, u, 0] = np.nan
+                out[v, u, 1] = np.nan
+                out[v, u, 2] = np.nan
+                continue
+            pa = np.float64(plane[0, bv, bu])
+            pb = np.float64(plane[1, bv, bu])
+            store_normal(out, v, u, fx * pa, fy * pb,
+                         np.float64(plane[2, bv, bu]) - pa * (bu - cx) - pb * (bv - cy),
+                         (u - cx) / fx, (v - cy) / fy, 1.0)
+
+
+def choose_windows(z: np.ndarray, fit_n: np.ndarray, score: np.ndarray, fx: float, fy: float,
+                   cx: float, cy: float, *, shift: int, gate: float, self_weight: float,
+                   out: np.ndarray, big: tuple[np.ndarray, np.ndarray] | None = None,
+                   big_gate: float | None = None) -> None:
+    """Every valid pixel takes the normal of the best of its nine windows (module doc).
+
+    ``fit_n`` (3, H, W) and ``score`` (H, W) are the centred-window fits of
+    :func:`box_fit_windows`.
+
+    With ``big`` (the normals and scores of larger centred windows), a pixel whose large
+    window has a residual variance ``<= big_gate`` (default ``gate``) takes the large
+    window's normal first.
+
+    The centred window is kept when its residual variance ``score`` is ``<= gate``; otherwise
+    the window of least score among the nine wins, the centred one's score multiplied by
+    ``self_weight`` first (it wins ties). Writes every pixel of ``out`` (H, W, 3) float32:
+    NaN at invalid depth and where no window has a fit.
+    """
+    big_n, big_s = big if big is not None else (fit_n[:, :1], score[:1])
+    bg = gate if big_gate is None else big_gate
+    run_rows(_choose_rows, z.shape[0], z, fit_n, score, big_n, big_s, int(shift), float(gate),
+             float(bg), float(self_weight), float(fx), float(fy), float(cx), float(cy), out, min_rows=16)
+
+
+def box_fit_from_prepared(z: np.ndarray, fx: float, fy: float, cx: float, cy: float, *,
+                          radius: int, shift: int, gate: float, self_weight: float,
+                          big_radius: int = 0, big_gate: float | None = None,
+                          sigma: float | None = None) -> np.ndarray:
+    """:func:`box_fit_normals` on prepared depth."""
+    out = np.empty((z.shape[0], z.shape[1], 3), dtype=np.float32)
+    if sigma is not None and sigma > 0.0:  # the local choice (needs the planes)
+        _, score, plane = box_fit_windows(z, fx, fy, cx, cy, radius, planes=True, normals=False)
+        if big_radius > radius:
+            big_n, big_s = box_fit_windows(z, fx, fy, cx, cy, big_radius)
+        else:
+            big_n = np.empty((3, z.shape[0], z.shape[1]), dtype=np.float32)
+            big_s = np.full_like(score, np.inf)
+        bg = gate if big_gate is None else big_gate
+        run_rows(_choose_local_rows, z.shape[0], z, score, plane, big_n, big_s, int(shift),
+                 float(gate), float(bg), 1.0 / (sigma * sigma), LOCAL_CAP, float(fx), float(fy),
+                 float(cx), float(cy), out, min_rows=16)
+        return out
+    fit_n, score = box_fit_windows(z, fx, fy, cx, cy, radius)
+    big = box_fit_windows(z, fx, fy, cx, cy, big_radius) if big_radius > radius else None
+    choose_windows(z, fit_n, score, fx, fy, cx, cy, shift=shift, gate=gate,
+                   self_weight=self_weight, out=out, big=big, big_gate=big_gate)
+    return out
+
+
+def _check_int(value: Any, name: str, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer in {lo}..{hi}; got {value!r}")
+    if not lo <= value <= hi:
+        raise ValueError(f"{name} must be in {lo}..{hi}; got {value}")
+    return int(value)
+
+
+def _check_float(value: Any, name: str, lo: float, hi: float) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name} must be a real number in [{lo}, {hi}]; got {value!r}")
+    value = float(value)
+    if not lo <= value <= hi:
+        raise ValueError(f"{name} must be in [{lo}, {hi}]; got {value!r}")
+    return value
+
+
+def box_fit_normals(depth: Any, K: Any, *, radius: int = 2, shift: int | None = None,
+                    gate: float = 0.0, self_weight: float = 1.0, big_radius: int = 0,
+                    sigma: float | None = None, depth_scale: float | None = None) -> np.ndarray:
+    """Normals from least-squares planes in inverse depth over box windows (module doc).
+
+    Parameters
+    ----------
+    depth : array_like, shape (H, W)
+        Planar depth. float32/float64; integers need ``depth_scale``. Invalid depth (0,
+        negative, NaN, inf) gives NaN and never enters a fit.
+    K : Intrinsics, array (3, 3) or (fx, fy, cx, cy)
+        Intrinsics in pixels, 0-based pixel centres.
+    radius : int in 1..8, default 2
+        Windows of ``(2 radius + 1)^2`` pixels.
+    shift : int in 0..radius, optional
+        Offset of the eight shifted windows (default ``radius``: the pixel at their edge or
+        corner). 0 keeps the centred window (a plain box fit, FALS-like).
+    gate : float >= 0, default 0
+        Residual variance (footprints^2) up to which the centred window is kept outright.
+    self_weight : float in (0, 1], default 1
+        The centred window's residual is multiplied by it before the comparison.
+    big_radius : int in 0..16, default 0
+        With ``big_radius > radius``: a pixel whose centred ``(2 big_radius + 1)^2`` window
+        has a residual variance ``<= gate`` takes that window's normal (one plane within the
+        noise: the larger support wins); 0: off.
+    sigma : float > 0, optional
+        Noise in footprints (:func:`depthnormals.estimate_noise`). Given, the nine windows
+        are ranked by how well their planes explain the pixel's own 3x3 neighbourhood (the
+        sum of squared residuals in units of ``sigma^2``, each capped at
+        :data:`LOCAL_CAP`) instead of by their own residual variance; ``self_weight`` is then
+        not used.
+    depth_scale : float, optional
+        Metres per unit of integer depth.
+
+    Returns
+    -------
+    normals : ndarray, shape (H, W, 3), float32
+        Unit normals facing the camera; NaN at invalid depth and where no window holds
+        :data:`MIN_POINTS` valid pixels.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from depthnormals.analytic import tilted_plane
+    >>> r = tilted_plane().render(shape=(40, 50), K=(60.0, 60.0, 24.5, 19.5))
+    >>> n = box_fit_normals(r.depth, r.K)
+    >>> bool(np.abs(n - r.normals).max() < 1e-5)
+    True
+    """
+    rad = _check_int(radius, "radius", 1, 8)
+    sh = rad if shift is None else _check_int(shift, "shift", 0, rad)
+    g = _check_float(gate, "gate", 0.0, np.inf)
+    sw = _check_float(self_weight, "self_weight", 0.0, 1.0)
+    big = _check_int(big_radius, "big_radius", 0, 16)
+    sg = None if sigma is None else _check_float(sigma, "sigma", 0.0, np.inf)
+    if sg == 0.0:
+        raise ValueError("sigma must be > 0 (or None)")
+    if sw == 0.0:
+        raise ValueError("self_weight must be > 0")
+    z, cam = prepare(depth, K, depth_scale)
+    return box_fit_from_prepared(z, cam.fx, cam.fy, cam.cx, cam.cy, radius=rad, shift=sh,
+                                 gate=g, self_weight=sw, big_radius=big, sigma=sg)

@@ -1,0 +1,210 @@
+"""The noise estimate, the box-fit kernels and the noise-aware selection (issue 13)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from depthnormals.kernels.depth import prepare
+
+import depthnormals as dn
+from depthnormals.analytic import box_on_floor, make_scene, planar_interior, tilted_plane
+from depthnormals.ddm.auto import box_radius
+from depthnormals.ddm.boxfit import MIN_POINTS, box_fit_normals, box_fit_windows
+
+K_SMALL = (160.0, 160.0, 79.5, 59.5)
+
+
+def _noisy(depth: np.ndarray, fx: float, sigma: float, seed: int = 0) -> np.ndarray:
+    d = depth.copy()
+    m = d > 0
+    d[m] += np.random.default_rng(seed).normal(size=int(m.sum())) * sigma * d[m] / fx
+    return d
+
+
+@pytest.mark.parametrize("sigma", [0.05, 0.1, 0.3])
+def test_noise_estimate_recovers_sigma_on_a_noisy_plane(sigma):
+    r = tilted_plane().render()
+    est = dn.estimate_noise(_noisy(r.depth, r.K.fx, sigma), r.K)
+    assert abs(est - sigma) < 0.1 * sigma
+
+
+def test_noise_estimate_is_tiny_on_clean_depth_and_unit_free():
+    r = box_on_floor().render()
+    assert dn.estimate_noise(r.depth.astype(np.float32), r.K) < 1e-3  # float32 rounding only
+    d = _noisy(r.depth, r.K.fx, 0.1)
+    assert dn.estimate_noise(d, r.K) == pytest.approx(dn.estimate_noise(d * 1000.0, r.K), rel=1e-9)
+    assert abs(dn.estimate_noise(d, r.K) - 0.1) < 0.01  # edges do not move the median
+
+
+def test_noise_estimate_without_triples_is_nan():
+    z = np.zeros((5, 6))
+    z[2, 2] = 1.0
+    assert np.isnan(dn.estimate_noise(z, K_SMALL))
+
+
+def test_box_fit_is_exact_on_planes():
+    r = tilted_plane().render(shape=(120, 160), K=K_SMALL)
+    for radius in (1, 2, 5):
+        n = box_fit_normals(r.depth, r.K, radius=radius)
+        assert np.abs(n - r.normals).max() < 2e-5
+    # every face interior of the box scene, with shifted windows choosing at the edges
+    r = box_on_floor().render(shape=(120, 160), K=K_SMALL)
+    n = box_fit_normals(r.depth, r.K, radius=2)
+    inner = planar_interior(r, radius=2)
+    err = dn.angular_error(n, r.normals)[inner]
+    assert np.nanmax(err) < 1e-3
+
+
+def _reference_fit(z: np.ndarray, fx, fy, cx, cy, r):
+    """Per-pixel numpy least squares of w = a du + b dv + c (the slow, readable path)."""
+    h, w = z.shape
+    nrm = np.full((3, h, w), np.nan)
+    score = np.full((h, w), np.inf)
+    for v in range(h):
+        for u in range(w):
+            rows = []
+            for dv in range(-r, r + 1):
+                for du in range(-r, r + 1):
+                    a, b = v + dv, u + du
+                    if 0 <= a < h and 0 <= b < w and np.isfinite(z[a, b]):
+                        rows.append((du, dv, 1.0, 1.0 / z[a, b]))
+            if len(rows) < MIN_POINTS:
+                continue
+            m = np.array(rows)
+            X, y = m[:, :3], m[:, 3]
+            if np.linalg.matrix_rank(X) < 3:
+                continue
+            (ca, cb, cc), *_ = np.linalg.lstsq(X, y, rcond=None)
+            rss = float(np.sum((X @ np.array([ca, cb, cc]) - y) ** 2))
+            n = np.array([fx * ca, fy * cb, cc - ca * (u - cx) - cb * (v - cy)])
+            n /= np.linalg.norm(n)
+            if n @ np.array([(u - cx) / fx, (v - cy) / fy, 1.0]) > 0:
+                n = -n
+            nrm[:, v, u] = n
+            score[v, u] = rss / (len(rows) - 3) * (fx / cc) ** 2
+    return nrm, score
+
+
+@pytest.mark.parametrize("radius", [1, 2, 4])
+def test_fast_box_fit_equals_the_numpy_reference(radius):
+    r = make_scene("sphere-before-wall").render(shape=(36, 44), K=(40.0, 40.0, 21.5, 17.5))
+    d = _noisy(r.depth, 40.0, 0.3, seed=1)
+    d[5:9, 10:13] = 0.0  # a hole
+    d[20, 30] = np.nan
+    z, cam = prepare(d, r.K, None)
+    fast_n, fast_s = box_fit_windows(z, cam.fx, cam.fy, cam.cx, cam.cy, radius)
+    ref_n, ref_s = _reference_fit(z, cam.fx, cam.fy, cam.cx, cam.cy, radius)
+    assert np.array_equal(np.isnan(fast_n), np.isnan(ref_n))
+    ok = np.isfinite(ref_s)
+    assert np.nanmax(np.abs(fast_n - ref_n)) < 1e-5
+    assert np.allclose(fast_s[ok], ref_s[ok], rtol=1e-3, atol=1e-6)
+    assert np.all(np.isinf(fast_s[~ok]))
+
+
+def test_box_radius_follows_the_noise():
+    assert box_radius(float("nan")) == 1
+    assert box_radius(0.1) == 2
+    assert box_radius(0.43) == 3
+    assert box_radius(100.0) == 6
+
+
+def test_auto_on_clean_depth_is_the_curvature_selection_with_zero_margin():
+    r = box_on_floor().render(shape=(120, 160), K=K_SMALL)
+    d = r.depth.astype(np.float32)
+    auto = dn.estimate_normals(d, r.K, method="3f2n+", selection="auto")
+    ref = dn.estimate_normals(d, r.K, method="3f2n+", consistency=0.0)
+    assert np.array_equal(auto, ref, equal_nan=True)
+    # the generic path (any estimator's normals) agrees with the fused one
+    gen = dn.discontinuity_discrimination(dn.estimate_normals(d, r.K, method="3f2n"), d, r.K,
+                                          selection="auto")
+    assert np.array_equal(auto, gen, equal_nan=True)
+
+
+def test_auto_on_noisy_depth_beats_the_curvature_selection():
+    r = box_on_floor().render(shape=(240, 320), K=(262.5, 262.5, 159.5, 119.5))
+    d = _noisy(r.depth, r.K.fx, 0.1)
+    e_today = dn.normal_metrics(dn.estimate_normals(d, r.K), r.normals).mean
+    e_auto = dn.normal_metrics(dn.estimate_normals(d, r.K, selection="auto"), r.normals).mean
+    e_box = dn.normal_metrics(dn.estimate_normals(d, r.K, selection="box-fit"), r.normals).mean
+    assert e_auto < 0.1 * e_today  # measured 0.63 vs 11.1 deg
+    assert e_box == e_auto  # noisy depth: "auto" is the box-fit
+
+
+def test_auto_keeps_the_abstentions_of_the_base():
+    r = box_on_floor().render(shape=(120, 160), K=K_SMALL)
+    for d in (r.depth, _noisy(r.depth, K_SMALL[0], 0.1)):
+        base = dn.estimate_normals(d, r.K, method="line-mod")
+        plus = dn.estimate_normals(d, r.K, method="line-mod+", selection="auto")
+        assert np.isnan(base).any()
+        assert np.array_equal(np.isnan(plus).any(-1), np.isnan(base).any(-1) | ~(d > 0))
+
+
+def test_box_fit_rejects_bad_options():
+    z = np.ones((8, 8))
+    with pytest.raises(ValueError, match="radius"):
+        box_fit_normals(z, K_SMALL, radius=0)
+    with pytest.raises(TypeError, match="radius"):
+        box_fit_normals(z, K_SMALL, radius=2.5)
+    with pytest.raises(ValueError, match="shift"):
+        box_fit_normals(z, K_SMALL, radius=2, shift=3)
+    with pytest.raises(ValueError, match="gate"):
+        box_fit_normals(z, K_SMALL, gate=-1.0)
+
+
+def _reference_local_choice(z, K, r, big, gate, sigma):
+    """Per-pixel numpy version of the box-fit's choice with a noise level (module doc)."""
+    fx, fy, cx, cy = K
+    nrm_s, s_s = _reference_fit(z, fx, fy, cx, cy, r)
+    nrm_b, s_b = _reference_fit(z, fx, fy, cx, cy, big)
+    h, w = z.shape
+    out = np.full((h, w, 3), np.nan)
+    for v in range(h):
+        for u in range(w):
+            if not np.isfinite(z[v, u]):
+                continue
+            if s_b[v, u] <= gate:
+                out[v, u] = nrm_b[:, v, u]
+                continue
+            best, pick = np.inf, (v, u)
+            if not s_s[v, u] <= gate:
+                for dv, du in ((0, 0), (-1, 0), (0, -1), (0, 1), (1, 0), (-1, -1), (-1, 1),
+                               (1, -1), (1, 1)):
+                    a, b = v + r * dv, u + r * du
+                    if not (0 <= a < h and 0 <= b < w and np.isfinite(s_s[a, b])):
+                        continue
+                    n = nrm_s[:, a, b]
+                    total = 0.0
+                    for p in range(max(v - 1, 0), min(v + 2, h)):
+                        for q in range(max(u - 1, 0), min(u + 2, w)):
+                            if np.isfinite(z[p, q]):
+                                ray_p = np.array([(q - cx) / fx, (p - cy) / fy, 1.0])
+                                ray_c = np.array([(b - cx) / fx, (a - cy) / fy, 1.0])
+                                # the window's plane, through its fitted point at its centre
+                                pred = (n @ ray_p) / (n @ ray_c) * _centre_w(z, a, b, r)
+                                res = (1.0 / z[p, q] - pred) * fx * z[p, q] / sigma
+                                total += min(res * res, 25.0)
+                    if total < best:
+                        best, pick = total, (a, b)
+            out[v, u] = nrm_s[:, pick[0], pick[1]]
+    return out
+
+
+def _centre_w(z, a, b, r):
+    """The fitted inverse depth at a window's centre (its intercept c)."""
+    h, w = z.shape
+    rows = [(du, dv, 1.0, 1.0 / z[a + dv, b + du]) for dv in range(-r, r + 1)
+            for du in range(-r, r + 1)
+            if 0 <= a + dv < h and 0 <= b + du < w and np.isfinite(z[a + dv, b + du])]
+    m = np.array(rows)
+    return np.linalg.lstsq(m[:, :3], m[:, 3], rcond=None)[0][2]
+
+
+def test_local_window_choice_equals_the_numpy_reference():
+    K = (40.0, 40.0, 21.5, 17.5)
+    r = box_on_floor().render(shape=(30, 40), K=K)
+    d = _noisy(r.depth, 40.0, 0.1, seed=2)
+    z, _ = prepare(d, K, None)
+    fast = box_fit_normals(d, K, radius=1, big_radius=3, gate=0.03, sigma=0.1)
+    ref = _reference_local_choice(z, K, 1, 3, 0.03, 0.1)
+    assert np.array_equal(np.isnan(fast), np.isnan(ref))
+    assert np.nanmax(np.abs(fast - ref)) < 1e-4
