@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from depthnormals.kernels.depth import prepare
 
 import depthnormals as dn
 from depthnormals.analytic import box_on_floor, make_scene, planar_interior, tilted_plane
 from depthnormals.ddm.auto import box_radius
 from depthnormals.ddm.boxfit import MIN_POINTS, box_fit_normals, box_fit_windows
+from depthnormals.kernels.depth import prepare
 
 K_SMALL = (160.0, 160.0, 79.5, 59.5)
 

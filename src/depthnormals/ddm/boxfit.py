@@ -315,9 +315,11 @@ def _choose_rows(v0, v1, z, fit_n, score, big_n, big_score, shift, gate, big_gat
 
 @nb.njit(**_JIT)
 def _choose_local_rows(v0, v1, z, score, plane, big_n, big_score, shift, gate, big_gate, inv_var,
-                       cap, fx, fy, cx, cy, out):
+                       cap, cam, out):
     """Rows of :func:`choose_windows` with ``plane``: among the nine windows the one whose plane
-    explains the pixel's own 3x3 best (truncated squared residuals in noise units)."""
+    explains the pixel's own 3x3 best (truncated squared residuals in noise units).
+    ``cam`` is ``(fx, fy, cx, cy)``; writes ``out`` rows ``v0 .. v1 - 1``."""
+    fx, fy, cx, cy = cam
     h, w = z.shape
     sd = math.sqrt(inv_var)
     pw = np.empty(9)
@@ -428,8 +430,8 @@ def box_fit_from_prepared(z: np.ndarray, fx: float, fy: float, cx: float, cy: fl
             big_s = np.full_like(score, np.inf)
         bg = gate if big_gate is None else big_gate
         run_rows(_choose_local_rows, z.shape[0], z, score, plane, big_n, big_s, int(shift),
-                 float(gate), float(bg), 1.0 / (sigma * sigma), LOCAL_CAP, float(fx), float(fy),
-                 float(cx), float(cy), out, min_rows=16)
+                 float(gate), float(bg), 1.0 / (sigma * sigma), LOCAL_CAP,
+                 (float(fx), float(fy), float(cx), float(cy)), out, min_rows=16)
         return out
     fit_n, score = box_fit_windows(z, fx, fy, cx, cy, radius)
     big = box_fit_windows(z, fx, fy, cx, cy, big_radius) if big_radius > radius else None
