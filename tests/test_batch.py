@@ -50,7 +50,9 @@ def test_batch_equals_single_calls(stack, method, dtype, two_threads):
         assert _same_bits(batch[i], ref), f"frame {i} differs"
     # the holes are holes and the rest is a real estimate
     assert np.isnan(batch[0, 40:47, 60:70]).all()
-    assert np.isfinite(batch[0, 60, 10:150]).mean() > 0.8
+    # PCL abstains within its smoothing window of every invalid pixel (pcl.distance_map), and
+    # this scene has 3 % random holes: about half its pixels get no normal, by design
+    assert np.isfinite(batch[0, 60, 10:150]).mean() > (0.4 if method.startswith("pcl-") else 0.8)
 
 
 def test_per_frame_intrinsics_and_options(stack, two_threads):
