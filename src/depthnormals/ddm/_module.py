@@ -49,7 +49,7 @@ class ModuleOptions:
     derivatives: str = "inverse-depth"
     slope: str = "min"
     footprint: str = "pixel"
-    selection: str = "curvature"
+    selection: str = "auto"
     fit_radius: int = 2
     self_weight: float = 0.8
     consistency: float | None = 0.1
