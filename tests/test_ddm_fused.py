@@ -157,7 +157,12 @@ def test_fused_crf_on_degenerate_shapes(shape):
     z = (1.0 + 0.1 * rng.random(shape)).astype(np.float32)
     z[rng.random(shape) < 0.2] = 0.0
     Ks = (100.0, 100.0, 3.0, 2.0)
-    opts = {"correlation": "kendall", "crf": True, "consistency": None, "lambda_": 1.0}
+    default = dn.estimate_normals(z, Ks, method="3f2n+")  # selection="auto": no crash either
+    assert np.isnan(default[z == 0]).all()
+    ok = ~np.isnan(default[..., 0])
+    assert np.allclose(np.linalg.norm(default[ok], axis=-1), 1.0, atol=1e-5)
+    opts = {"selection": "curvature", "correlation": "kendall", "crf": True, "consistency": None,
+            "lambda_": 1.0}
     fused = dn.estimate_normals(z, Ks, method="3f2n+", **opts)
     separate = dn.discontinuity_discrimination(dn.three_filters_to_normal(z, Ks), z, Ks, **opts)
     assert np.isnan(fused[z == 0]).all()
