@@ -3,7 +3,7 @@
 640x480 demo-room, one thread, clean and with Gaussian noise 0.1 z/f and 0.4 z/f (seed 0);
 every case timed interleaved round-robin (``benchmarks/targets.py``), FALS
 (``cv2.rgbd.RgbdNormals`` window 5, ``apply`` on ``depthTo3d`` points) on the same depth.
-Targets: ``3f2n+[selection=auto]`` <= 2.0x FALS on clean depth, <= 3.0x on noisy depth.
+Targets: ``3f2n+`` (default ``selection="auto"``) <= 2.0x FALS on clean depth, <= 3.0x on noisy depth.
 
     python benchmarks/auto_speed.py [--repeats 30]
 """
@@ -43,9 +43,9 @@ def main() -> None:
         d = d.astype(np.float32)
         pts = cv2.rgbd.depthTo3d(d, K)
         cases = [("opencv FALS w=5 (apply only)", lambda pts=pts: fals.apply(pts)),
-                 ("3f2n+ (today's default)", lambda d=d: dn.estimate_normals(d, K)),
-                 ("3f2n+[selection=auto]",
-                  lambda d=d: dn.estimate_normals(d, K, selection="auto")),
+                 ("3f2n+ curvature (default until #13)",
+                  lambda d=d: dn.estimate_normals(d, K, selection="curvature", consistency=0.1)),
+                 ("3f2n+ default (selection=auto)", lambda d=d: dn.estimate_normals(d, K)),
                  ("estimate_noise alone", lambda d=d: dn.estimate_noise(d, K))]
         res = _measure_all([fn for _, fn in cases], args.repeats)
         base = res[0][0]

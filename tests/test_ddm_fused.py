@@ -52,6 +52,9 @@ def _agree(a, b, *, max_deg=1e-3):
     {"correlation": "pearson", "crf": True},
 ])
 def test_fused_equals_estimator_then_module(rough, dtype, opts):
+    # the fused curvature path: selection="curvature" explicitly (the default "auto" takes the
+    # box-fit on this noisy scene: tests/test_ddm_noise.py), consistency 0.1 unless given
+    opts = {"selection": "curvature", "consistency": 0.1, **opts}
     z = rough.astype(dtype)
     own = {k: v for k, v in opts.items() if k == "aggregate"}
     rest = {k: v for k, v in opts.items() if k != "aggregate"}
@@ -70,7 +73,7 @@ def test_fused_equals_estimator_then_module(rough, dtype, opts):
     ({}, {"selection": "plane-fit"}), ({}, {"derivatives": "depth"}),
 ])
 def test_fused_path_declines_what_it_does_not_implement(rough, own, rest):
-    assert fused_plus(rough, K, None, own, rest) is None
+    assert fused_plus(rough, K, None, own, {"selection": "curvature", **rest}) is None
 
 
 def test_fused_path_validates_module_options(rough):
@@ -109,7 +112,7 @@ def _brute_force_crf(z, n0, kq, tau, sigma, lam):
 def test_crf_skip_test_is_exact(rough, lam):
     z, cam = prepare(rough[30:60, 40:80], K, None)
     Ks = (cam.fx, cam.fy, cam.cx, cam.cy)
-    n0 = dn.estimate_normals(z, Ks, method="3f2n+")
+    n0 = dn.estimate_normals(z, Ks, method="3f2n+", selection="curvature", consistency=0.1)
     kq = dn.ddm.depth_curvature(z, Ks) * z
     tau = kendall_map(z)
     out = np.empty_like(n0)
@@ -154,7 +157,12 @@ def test_fused_crf_on_degenerate_shapes(shape):
     z = (1.0 + 0.1 * rng.random(shape)).astype(np.float32)
     z[rng.random(shape) < 0.2] = 0.0
     Ks = (100.0, 100.0, 3.0, 2.0)
-    opts = {"correlation": "kendall", "crf": True, "consistency": None, "lambda_": 1.0}
+    default = dn.estimate_normals(z, Ks, method="3f2n+")  # selection="auto": no crash either
+    assert np.isnan(default[z == 0]).all()
+    ok = ~np.isnan(default[..., 0])
+    assert np.allclose(np.linalg.norm(default[ok], axis=-1), 1.0, atol=1e-5)
+    opts = {"selection": "curvature", "correlation": "kendall", "crf": True, "consistency": None,
+            "lambda_": 1.0}
     fused = dn.estimate_normals(z, Ks, method="3f2n+", **opts)
     separate = dn.discontinuity_discrimination(dn.three_filters_to_normal(z, Ks), z, Ks, **opts)
     assert np.isnan(fused[z == 0]).all()

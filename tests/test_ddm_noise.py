@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 import depthnormals as dn
 from depthnormals.analytic import box_on_floor, make_scene, planar_interior, tilted_plane
-from depthnormals.ddm.auto import box_radius
+from depthnormals.ddm.auto import box_radius, box_select
 from depthnormals.ddm.boxfit import MIN_POINTS, box_fit_normals, box_fit_windows
 from depthnormals.kernels.depth import prepare
 
@@ -112,7 +114,7 @@ def test_auto_on_clean_depth_is_the_curvature_selection_with_zero_margin():
     r = box_on_floor().render(shape=(120, 160), K=K_SMALL)
     d = r.depth.astype(np.float32)
     auto = dn.estimate_normals(d, r.K, method="3f2n+", selection="auto")
-    ref = dn.estimate_normals(d, r.K, method="3f2n+", consistency=0.0)
+    ref = dn.estimate_normals(d, r.K, method="3f2n+", selection="curvature", consistency=0.0)
     assert np.array_equal(auto, ref, equal_nan=True)
     # the generic path (any estimator's normals) agrees with the fused one
     gen = dn.discontinuity_discrimination(dn.estimate_normals(d, r.K, method="3f2n"), d, r.K,
@@ -123,10 +125,11 @@ def test_auto_on_clean_depth_is_the_curvature_selection_with_zero_margin():
 def test_auto_on_noisy_depth_beats_the_curvature_selection():
     r = box_on_floor().render(shape=(240, 320), K=(262.5, 262.5, 159.5, 119.5))
     d = _noisy(r.depth, r.K.fx, 0.1)
-    e_today = dn.normal_metrics(dn.estimate_normals(d, r.K), r.normals).mean
+    e_today = dn.normal_metrics(dn.estimate_normals(d, r.K, selection="curvature", consistency=0.1),
+                                r.normals).mean
     e_auto = dn.normal_metrics(dn.estimate_normals(d, r.K, selection="auto"), r.normals).mean
     e_box = dn.normal_metrics(dn.estimate_normals(d, r.K, selection="box-fit"), r.normals).mean
-    assert e_auto < 0.1 * e_today  # measured 0.63 vs 11.1 deg
+    assert e_auto < 0.1 * e_today  # measured 0.63 vs 11.1 deg (curvature selection, the old default)
     assert e_box == e_auto  # noisy depth: "auto" is the box-fit
 
 
@@ -208,3 +211,63 @@ def test_local_window_choice_equals_the_numpy_reference():
     ref = _reference_local_choice(z, K, 1, 3, 0.03, 0.1)
     assert np.array_equal(np.isnan(fast), np.isnan(ref))
     assert np.nanmax(np.abs(fast - ref)) < 1e-4
+
+
+# --- "auto" is the module's default (issue 13) -------------------------------------------
+
+def test_the_module_default_is_auto():
+    assert dn.ddm.module_defaults()["selection"] == "auto"
+    assert dn.ddm.ModuleOptions().selection == "auto"
+    # the margin of an explicit selection="curvature" is unchanged (0.1); auto's clean branch
+    # takes min(consistency, 0)
+    assert dn.ddm.module_defaults()["consistency"] == 0.1
+
+
+@pytest.mark.parametrize("scene", ["tilted-plane", "box-on-floor", "stairs", "sphere-before-wall"])
+def test_default_on_clean_analytic_depth_is_the_curvature_selection_with_zero_margin(scene):
+    r = make_scene(scene).render(shape=(120, 160), K=K_SMALL)
+    assert dn.estimate_noise(r.depth, r.K) < 0.03
+    for method in ("3f2n+", "d2nt+"):  # the fused path and the generic one
+        default = dn.estimate_normals(r.depth, r.K, method=method)
+        clean = dn.estimate_normals(r.depth, r.K, method=method, selection="curvature", consistency=0.0)
+        assert np.array_equal(default, clean, equal_nan=True), method
+        n0 = dn.estimate_normals(r.depth, r.K, method=method[:-1])
+        assert np.array_equal(dn.discontinuity_discrimination(n0, r.depth, r.K),
+                              dn.discontinuity_discrimination(n0, r.depth, r.K, selection="curvature",
+                                                              consistency=0.0), equal_nan=True)
+    # the margin matters: the old default (0.1) differs at edges (1144 / 377 / 1356 pixels of
+    # 3f2n+ on box / stairs / sphere here), not on the plane
+    old = dn.estimate_normals(r.depth, r.K, method="3f2n+", selection="curvature", consistency=0.1)
+    new = dn.estimate_normals(r.depth, r.K, method="3f2n+")
+    assert np.array_equal(new, old, equal_nan=True) == (scene == "tilted-plane")
+
+
+@pytest.mark.parametrize("scene", ["box-on-floor", "sphere-before-wall"])
+def test_default_on_noisy_analytic_depth_is_the_box_fit(scene):
+    r = make_scene(scene).render(shape=(120, 160), K=K_SMALL)
+    d = _noisy(r.depth, K_SMALL[0], 0.1)
+    assert dn.estimate_noise(d, r.K) >= 0.03
+    for method in ("3f2n+", "d2nt+", "line-mod+"):
+        default = dn.estimate_normals(d, r.K, method=method)
+        box = dn.estimate_normals(d, r.K, method=method, selection="box-fit")
+        assert np.array_equal(default, box, equal_nan=True), method
+    # the fused 3f2n+ under noise is the box-fit branch alone (3F2N's normals are not used)
+    z, cam = prepare(d, r.K, None)
+    branch = box_select(z, None, cam.fx, cam.fy, cam.cx, cam.cy, dn.estimate_noise(d, r.K))
+    default = dn.estimate_normals(d, r.K)
+    assert np.array_equal(default, branch, equal_nan=True)
+    old = dn.estimate_normals(d, r.K, selection="curvature", consistency=0.1)
+    e, e_old = (dn.normal_metrics(n, r.normals).mean for n in (default, old))
+    assert e < 0.25 * e_old, (e, e_old)
+
+
+def test_estimate_noise_is_public_and_documented():
+    import depthnormals.ddm.noise as noise
+
+    assert "estimate_noise" in dn.__all__
+    assert dn.estimate_noise is noise.estimate_noise
+    doc = dn.estimate_noise.__doc__
+    assert "Parameters" in doc and "Returns" in doc and "footprint" in doc
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    assert "estimate_noise" in readme
+    assert "estimate_noise" in (Path(__file__).resolve().parents[1] / "docs" / "3f2n-plus.md").read_text()

@@ -273,13 +273,20 @@ def test_memory_layouts_give_identical_results(method):
     assert np.isnan(z32[10, 11]) and z32[5, 6] == 0.0
 
 
+#: The curvature selection with the consistency margin 0.1 (the module default before issue
+#: 13): the near-tie bound below was measured with it. The default (selection="auto", margin 0
+#: on clean depth) is tested by test_default_module_float64_input below.
+_MARGIN_01 = {"selection": "curvature", "consistency": 0.1}
+
+
 @pytest.mark.parametrize("method", METHODS)
 def test_float64_and_float16_input(method):
     z32 = _variants(method)
-    ref = dn.estimate_normals(z32, K, method=method)
+    opts = _MARGIN_01 if method.endswith("+") else {}
+    ref = dn.estimate_normals(z32, K, method=method, **opts)
     ok = np.isfinite(ref).all(axis=-1)
     for z in (z32.astype(np.float64), z32.astype(">f8"), z32.tolist()):
-        got = dn.estimate_normals(z, K, method=method)
+        got = dn.estimate_normals(z, K, method=method, **opts)
         assert got.dtype == np.float32
         assert np.array_equal(np.isfinite(got).all(axis=-1), ok)
         if method.endswith("+"):
@@ -293,6 +300,36 @@ def test_float64_and_float16_input(method):
     got = dn.estimate_normals(z16, K, method=method)
     np.testing.assert_array_equal(got, dn.estimate_normals(z16.astype(np.float32), K,
                                                            method=method))
+
+
+def _default_dtype_errors(method):
+    z32 = _variants(method)
+    ref = dn.estimate_normals(z32, K, method=method)
+    ok = np.isfinite(ref).all(axis=-1)
+    got = dn.estimate_normals(z32.astype(np.float64), K, method=method)
+    assert np.array_equal(np.isfinite(got).all(axis=-1), ok)
+    return dn.angular_error(got[ok][None], ref[ok][None])
+
+
+@pytest.mark.parametrize("method", [m for m in METHODS if m.endswith("+")])
+def test_default_module_float64_input(method):
+    """The default module (selection="auto": on this clean plane the curvature selection with
+    the consistency margin 0) on float64 vs float32 depth. With margin 0 the tangent test
+    ``S_c < S_own`` compares two near-zero values on a plane, so the depth dtype's rounding
+    decides it: measured at commit 543d40e (``_default_dtype_errors`` for every "+" form), up
+    to 1.045 % of the pixels differ by more than 1e-3 deg (pcl-average-depth-change+; d2nt+
+    0.696 %, sne-roadseg+ 0.557 %, sda-sne+ 0.418 %, line-mod+ 0.279 %, the others 0), at most
+    0.066 deg (line-mod+; d2nt+ and sda-sne+ 0.044)."""
+    err = _default_dtype_errors(method)
+    assert np.mean(err > 1e-3) < 0.011 and err.max() < 0.07
+
+
+@pytest.mark.xfail(strict=True, reason="margin 0 of the default makes near ties depend on the depth "
+                   "dtype (issue 13 follow-up: test_default_module_float64_input)")
+@pytest.mark.parametrize("method", ["d2nt+", "sne-roadseg+", "pcl-average-depth-change+"])
+def test_default_module_float64_input_within_the_margin_01_bound(method):
+    err = _default_dtype_errors(method)
+    assert np.mean(err > 1e-3) < 0.005 and err.max() < 1.0
 
 
 @pytest.mark.parametrize("method, opts", [("3f2n", {}), ("3f2n", {"kernel": "sobel"}),

@@ -22,19 +22,27 @@ HELP = "print the 3F2N+ ablation tables (Table I / II of the paper) for a datase
 
 TABLE1_AGGREGATES = ("median", "mean", "trimean", "trimmed-mean")
 TABLE1_CURVATURES = ("normal", "gauss", "max", "mean", "pixel-mean")
+#: The paper's selections: every row but the last passes ``selection="curvature"`` (the
+#: module's default is the noise-aware ``"auto"`` since issue 13, which is the box-fit on
+#: noisy depth); the last row is that default.
+_PAPER = {"selection": "curvature"}
 TABLE2_ROWS = (
     ("3F2N", None),
-    ("3F2N+ w/ Pearson", {"curvature": "none", "correlation": "pearson", "crf": False}),
-    ("3F2N+ w/ Kendall", {"curvature": "none", "correlation": "kendall", "crf": False}),
+    ("3F2N+ w/ Pearson", {**_PAPER, "curvature": "none", "correlation": "pearson", "crf": False}),
+    ("3F2N+ w/ Kendall", {**_PAPER, "curvature": "none", "correlation": "kendall", "crf": False}),
     ("3F2N+ w/ Kendall (prose: argmax)",
-     {"curvature": "none", "correlation": "kendall-prose", "crf": False}),
-    ("3F2N+ mean curvature (paper: plain arg-min)", {"self_weight": 1.0, "consistency": None}),
-    ("3F2N+ mean curvature, self_weight 0.8", {"consistency": None}),
-    ("3F2N+ mean curvature (default: + consistency)", {}),
-    ("3F2N+ mean + Kendall + CRF", {"correlation": "kendall", "crf": True, "consistency": None}),
-    ("3F2N+ mean + Pearson + CRF", {"correlation": "pearson", "crf": True, "consistency": None}),
+     {**_PAPER, "curvature": "none", "correlation": "kendall-prose", "crf": False}),
+    ("3F2N+ mean curvature (paper: plain arg-min)",
+     {**_PAPER, "self_weight": 1.0, "consistency": None}),
+    ("3F2N+ mean curvature, self_weight 0.8", {**_PAPER, "consistency": None}),
+    ("3F2N+ mean curvature + consistency 0.1", {**_PAPER, "consistency": 0.1}),
+    ("3F2N+ mean + Kendall + CRF",
+     {**_PAPER, "correlation": "kendall", "crf": True, "consistency": None}),
+    ("3F2N+ mean + Pearson + CRF",
+     {**_PAPER, "correlation": "pearson", "crf": True, "consistency": None}),
     ("3F2N+ mean + CRF (no correlation)",
-     {"correlation": "none", "crf": True, "consistency": None}),
+     {**_PAPER, "correlation": "none", "crf": True, "consistency": None}),
+    ("3F2N+ default (selection auto)", {}),
 )
 
 
@@ -122,7 +130,8 @@ def run(args: argparse.Namespace) -> int:
                     for curv in TABLE1_CURVATURES:
                         # the paper's selection: plain arg-min, the pixel winning ties
                         n = discontinuity_discrimination(base, fr.depth, fr.K, curvature=curv,
-                                                         self_weight=1.0, consistency=None)
+                                                         selection="curvature", self_weight=1.0,
+                                                         consistency=None)
                         label = f"{agg:<13} {ker:<8} {curv}"
                         results.setdefault(label, {}).setdefault(g, []).append(_score(n, fr))
         else:

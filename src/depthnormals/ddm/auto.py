@@ -1,6 +1,7 @@
 """The noise-aware selections of the module: ``selection="auto"`` and ``selection="box-fit"``.
 
-``"auto"`` estimates the depth noise (:func:`depthnormals.ddm.noise.estimate_noise`, in pixel
+``"auto"`` is the module's default (and so of every ``"<name>+"`` method) since issue 13. It
+estimates the depth noise (:func:`depthnormals.ddm.noise.estimate_noise`, in pixel
 footprints ``z / f``) and picks the support from it:
 
 - **clean depth** (``sigma < NOISE_CLEAN``): the curvature selection of the paper (stage 1

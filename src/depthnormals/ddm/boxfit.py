@@ -61,6 +61,10 @@ LOCAL_CAP = 25.0
 SHIFTS = np.array([[0, 0], [-1, 0], [0, -1], [0, 1], [1, 0], [-1, -1], [-1, 1], [1, -1],
                    [1, 1]], dtype=np.int64)
 
+#: The column running sums of :func:`_fit_rows` restart with direct sums at every row that
+#: is a multiple of this, so their rounding is the same however the rows are split into bands.
+RESTART = 64
+
 # Row sums (index of the first axis of a ring slot), over the valid pixels of the row
 # segment u - r .. u + r: count, sum du, sum du^2, sum w, sum du w, sum w^2.
 _R_N, _R_U, _R_UU, _R_W, _R_UW, _R_WW = range(6)
@@ -186,7 +190,10 @@ def _fit_rows(v0, v1, z, fx, fy, cx, cy, r, out_n, out_score, out_plane, want_pl
 
     Row sums (:func:`_row_sums`) go into a ring of ``2 r + 2`` rows; the column sums are
     running sums down the band with the recurrences of :func:`_row_sums` (``dv`` for ``du``),
-    started directly at ``v0``: O(1) per pixel whatever ``r``.
+    started by direct sums at every row that is a multiple of :data:`RESTART` (a band
+    starting between two begins at the one before it): O(1) per pixel whatever ``r``, and
+    the rounding of the running sums does not depend on how the rows are split into bands
+    (a batch frame and a single call give the same bits).
     """
     h, w = z.shape
     span = 2 * r + 2
@@ -204,12 +211,18 @@ def _fit_rows(v0, v1, z, fx, fy, cx, cy, r, out_n, out_score, out_plane, want_pl
     nn = out_n if want_n else np.empty((3, 1, w), dtype=np.float32)
     rf = np.float64(r)
     r1 = rf + 1.0
-    nxt = max(v0 - r, 0)
-    for v in range(v0, v1):
+    start = (v0 // RESTART) * RESTART
+    nxt = max(start - r, 0)
+    for v in range(start, v1):
         while nxt <= min(v + r, h - 1):
             _row_sums(z[nxt], r, xm, xw, ring[nxt % span])
             nxt += 1
-        if v == v0:  # direct sums over dv = -r .. r
+        if v % RESTART == 0:  # direct sums over dv = -r .. r
+            t0[:] = 0.0
+            t1m0[:] = 0.0
+            t1m1[:] = 0.0
+            t1w[:] = 0.0
+            t2m0[:] = 0.0
             for dv in range(-r, r + 1):
                 row = v + dv
                 if row < 0 or row >= h:
@@ -247,6 +260,8 @@ def _fit_rows(v0, v1, z, fx, fy, cx, cy, r, out_n, out_score, out_plane, want_pl
                 t0[_R_UU, u] += e[_R_UU, u] - lv[_R_UU, u]
                 t0[_R_UW, u] += e[_R_UW, u] - lv[_R_UW, u]
                 t0[_R_WW, u] += e[_R_WW, u] - lv[_R_WW, u]
+        if v < v0:  # rows before the band: only to carry the running sums to v0
+            continue
         vn = v if want_n else 0
         _solve_row(t0, t1m0, t1m1, t1w, t2m0, fx, fy, acol, v - cy, nn[0, vn], nn[1, vn],
                    nn[2, vn], out_score[v], pl[0, v if want_plane else 0], pl[1, v if want_plane else 0],

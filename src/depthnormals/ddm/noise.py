@@ -112,8 +112,9 @@ def estimate_noise(depth: Any, K: Any, *, depth_scale: float | None = None) -> f
 
     Notes
     -----
-    Ours (issue 13), used by ``selection="auto"`` of
-    :func:`depthnormals.discontinuity_discrimination`. Quantised depth (e.g. 1 mm steps)
+    Ours (issue 13), used by ``selection="auto"``, the default of
+    :func:`depthnormals.discontinuity_discrimination` and so of every ``"<name>+"`` method:
+    below 0.03 footprints the depth counts as clean (docs/3f2n-plus.md). Quantised depth (e.g. 1 mm steps)
     reads as its rounding noise where it exceeds the sensor's.
 
     Examples

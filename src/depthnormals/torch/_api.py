@@ -14,7 +14,8 @@ from ._d2nt import VARIANTS, d2nt
 from ._ddm import refine
 from ._threefn import AGGREGATES, KERNELS, sne_roadseg, three_filters_to_normal
 
-__all__ = ["METHODS", "EstimateNormals", "estimate_normals", "method_defaults", "normals_mask"]
+__all__ = ["METHODS", "TORCH_MODULE_DEFAULTS", "EstimateNormals", "estimate_normals", "method_defaults",
+           "normals_mask"]
 
 _BASES = ("3f2n", "d2nt", "sne-roadseg")
 #: names accepted by :func:`estimate_normals` (``"<name>+"``: the estimator, then the DDM)
@@ -48,8 +49,15 @@ def _read_defaults() -> dict[str, dict[str, Any]]:
         params = inspect.signature(_numba_function(base)).parameters.values()
         out[base] = {p.name: p.default for p in params
                      if p.kind is inspect.Parameter.KEYWORD_ONLY and p.name != "depth_scale"}
-    out["+"] = dict(module_defaults())
+    out["+"] = {**module_defaults(), **TORCH_MODULE_DEFAULTS}
     return out
+
+
+#: Where the torch module's defaults differ from the numba module's: the noise-aware
+#: ``selection="auto"`` (the numba default) is not implemented here, so the torch default is
+#: its clean branch, the curvature selection with the consistency margin 0 (equal to the
+#: numba default on clean depth; on noisy depth the numba default is the box-fit).
+TORCH_MODULE_DEFAULTS = {"selection": "curvature", "consistency": 0.0}
 
 
 _DEFAULTS = _read_defaults()
@@ -57,7 +65,9 @@ _DEFAULTS = _read_defaults()
 
 def method_defaults(method: str) -> dict[str, Any]:
     """The options of ``method`` and their defaults: those of the numba library, read from
-    its signatures (so the torch path follows when they change).
+    its signatures (so the torch path follows when they change), except the module's
+    ``selection`` and ``consistency`` (:data:`TORCH_MODULE_DEFAULTS`: the torch path has no
+    noise-aware ``"auto"``; its default is auto's clean branch).
 
     Examples
     --------
@@ -196,7 +206,12 @@ def estimate_normals(depth: torch.Tensor, K: Any, *, method: str = "3f2n+",
         The options of the numba estimator of the same name, with the same defaults
         (:func:`method_defaults`): ``kernel``, ``kernel_size``, ``aggregate`` (3F2N),
         ``variant`` (D2NT) and, for ``"<name>+"``, those of
-        :func:`depthnormals.discontinuity_discrimination` except ``selection="plane-fit"``.
+        :func:`depthnormals.discontinuity_discrimination` with ``selection="curvature"`` only
+        (``"plane-fit"``, ``"box-fit"`` and ``"auto"`` raise ValueError). Module defaults:
+        the numba module's except :data:`TORCH_MODULE_DEFAULTS`, ``selection="curvature",
+        consistency=0.0``, the clean branch of the numba default ``selection="auto"``: the
+        same normals on clean depth; on noisy depth (noise >= 0.03 pixel footprints,
+        :func:`depthnormals.estimate_noise`) the numba default is the box-fit, not this.
 
     Returns
     -------
