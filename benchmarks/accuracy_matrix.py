@@ -32,8 +32,8 @@ from pathlib import Path
 import numpy as np
 
 import depthnormals as dn
-from depthnormals.analytic import make_scene
-from depthnormals.datasets import Frame, read_3f2n
+from depthnormals.datasets import read_3f2n
+from depthnormals.datasets.analytic import analytic_frames
 from depthnormals.evaluate import Protocol, discontinuity_mask, parse_method_spec, score_frame
 from depthnormals.evaluate._methods import split_method_list
 
@@ -43,29 +43,14 @@ METRICS = {"mean": "mean", "median": "median", "a11": "a11_25 (%)", "near": "edg
            "smooth": "smooth mean", "cov": "coverage (%)", "ms": "ms per frame"}
 
 
-def analytic(noise: float = 0.1, seed: int = 0):
-    """The analytic frames, clean and noisy (groups ``<scene>/<clean|noise0.1>``)."""
-    for name in SCENES:
-        r = make_scene(name).render()
-        K = r.K.matrix
-        mask = r.depth > 0
-        for level in (0.0, noise):
-            d = r.depth.copy()
-            if level:
-                rng = np.random.default_rng(seed)
-                d[mask] += rng.normal(size=int(mask.sum())) * level * d[mask] / r.K.fx
-            group = f"{name}/{'clean' if not level else f'noise{level:g}'}"
-            yield Frame(d, r.normals.astype(np.float32), K, mask.copy(), "0", group), r.depth
-
-
 def frames(synth: str | None, which: set[str]):
     """(frame, group, clean depth for the edge band) of every dataset asked for."""
     if "tk" in which:
         for f in read_3f2n(FIXTURE):
             yield f, "tk", f.depth
     if "analytic" in which:
-        for f, clean in analytic():
-            yield f, f.group, clean
+        for f in analytic_frames(scenes=SCENES):
+            yield f, f.group, f.meta["clean_depth"]
     if synth and "synth" in which:
         from depthnormals.datasets.synthetic import read_synthetic
 

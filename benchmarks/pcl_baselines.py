@@ -2,7 +2,7 @@
 cross product, beside FALS and the 3F2N family (issue 13, "the complete comparison").
 
 Accuracy: the analytic scenes box-on-floor, stairs, sphere-before-wall at 640x480, clean and
-with Gaussian noise 0.1 z/f (seed 0) (``depthnormals.commands.ablate.analytic_frames``), all
+with Gaussian noise 0.1 z/f (seed 0) (``depthnormals.datasets.analytic.analytic_frames``), all
 valid pixels but a 1-pixel border, folded; and the 3F2N torus-knot frame (background and
 1-pixel border masked, folded). Errors pool the pixels with a finite estimate; coverage is
 the share of scored pixels that got one. "edge": pixels within 2 px of a crease (> 10 deg)
@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 
 import depthnormals as dn
-from depthnormals.commands.ablate import analytic_frames
 from depthnormals.commands.bench import machine
 from depthnormals.datasets import read_3f2n
+from depthnormals.datasets.analytic import analytic_frames
 from depthnormals.evaluate._protocol import discontinuity_mask
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

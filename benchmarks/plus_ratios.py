@@ -1,7 +1,7 @@
 """Error ratios "<name>+" / "<name>" on the analytic scenes and the torus-knot frame (issue 3).
 
 Frames: box-on-floor, stairs, sphere-before-wall at 640x480, clean and with Gaussian noise
-0.1 z/f (seed 0) (``depthnormals.commands.ablate.analytic_frames``); mean angular error over
+0.1 z/f (seed 0) (``depthnormals.datasets.analytic.analytic_frames``); mean angular error over
 all valid pixels. Torus knot: the 3F2N protocol (background and 1-pixel border masked,
 folded, NaN dropped).
 
@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 import depthnormals as dn
-from depthnormals.commands.ablate import analytic_frames
 from depthnormals.datasets import read_3f2n
+from depthnormals.datasets.analytic import analytic_frames
 
 FIXTURE = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "3f2n-torusknot"
 

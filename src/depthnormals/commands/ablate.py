@@ -10,10 +10,11 @@ frame's valid ground truth minus a 1-pixel border, mean of the per-frame means p
 from __future__ import annotations
 
 import argparse
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
+
+from ..datasets.analytic import analytic_frames
 
 #: Seconds of compilation on a cold numba cache (see ``depthnormals.commands._firstrun``).
 FIRST_RUN_S = 90
@@ -62,24 +63,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", "-q", action="store_true",
                         help="no progress on stderr (one line per frame and table-1 row group "
                              "otherwise)")
-
-
-def analytic_frames(noise: float = 0.1, seed: int = 0) -> Iterator:
-    """Frames of the analytic scenes with creases and occlusions, clean and noisy."""
-    from ..analytic import make_scene
-    from ..datasets import Frame
-
-    for name in ("box-on-floor", "stairs", "sphere-before-wall"):
-        r = make_scene(name).render()
-        K = np.array([[r.K.fx, 0, r.K.cx], [0, r.K.fy, r.K.cy], [0, 0, 1.0]])
-        mask = r.depth > 0
-        for level in (0.0, noise):
-            d = r.depth.copy()
-            if level:
-                rng = np.random.default_rng(seed)
-                d[mask] += rng.normal(size=int(mask.sum())) * level * d[mask] / r.K.fx
-            group = f"{name}/{'clean' if not level else f'noise{level:g}'}"
-            yield Frame(d, r.normals.astype(np.float32), K, mask.copy(), "0", group)
 
 
 def _score(n: np.ndarray, frame) -> float:
