@@ -74,7 +74,7 @@ def _plus_body(v0, v1, rows, cam, filters, select, crf_args, out, kout, want_k, 
     work = scratch(w)
     pend = 0
     lag = 2 if crf else 1  # rows between computing a row and finishing one
-    prev = -1
+    prev = np.int64(-1)  # not the literal -1: row_normals would compile twice
     for r in range(max(v0 - lag, 0), min(v1 + lag, h + lag)):
         if r < h:
             s = r % 3
