@@ -34,6 +34,10 @@ _KEY_MAX = np.finfo(np.float64).max  # keys at or above it tie (first wins)
 
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
 _INL = {"cache": True, "error_model": "numpy", "inline": "always"}
+#: The helpers of the vectorised cross selection: its flags, compiled once and called (LLVM
+#: inlines them into its loop); ``inline="always"`` would copy and re-type them at every call,
+#: seconds of the first run.
+_CROSS_HELPER = {"cache": True, "error_model": "numpy", "fastmath": {"nsz", "contract", "arcp"}}
 
 
 @nb.njit(**_INL)
@@ -104,7 +108,7 @@ def inconsistency(a, b, t, rl, rr, rt, rb, A, B, ifx, ify, fx, inf):
     return s if s < inf else inf
 
 
-@nb.njit(cache=True, error_model="numpy", fastmath={"nsz", "contract", "arcp"})
+@nb.njit(**_CROSS_HELPER)
 def _pq_fast(a, b, t, rl, rr, rt, rb, A, B, ifx, ify, fx, one, zero):
     """:func:`inconsistency_pq` with the flags of :func:`_cross_select`, compiled once and
     called (not inlined by numba: LLVM inlines it) for each of the five normals there: five
@@ -181,12 +185,12 @@ def clamp_key(k, big):
     return k if k < big else big
 
 
-@nb.njit(**_INL)
+@nb.njit(**_CROSS_HELPER)
 def _key(kr, xr, big, inf):
     return clamp_key(kr, big) if xr == xr else inf
 
 
-@nb.njit(**_INL)
+@nb.njit(**_CROSS_HELPER)
 def _pick(kr, k, ok, xr, yr, tr, x, y, t):
     """(key, normal) of the candidate if its key is strictly smaller and it passes ``ok``."""
     kr = np.float64(kr)

@@ -157,8 +157,10 @@ def generic_normal(z, D, recip, v, u, fx, fy, cx, cy, deriv, smooth, roberts, mo
     if roberts:
         gu, gv = roberts_gradient(D, v, u)
     else:
-        gu = stencil_derivative(D, v, u, 0, 1, deriv, smooth, recip)
-        gv = stencil_derivative(D, v, u, 1, 0, deriv, smooth, recip)
+        zero = np.int64(0)  # not literals: one compiled stencil_derivative, not two
+        one = np.int64(1)
+        gu = stencil_derivative(D, v, u, zero, one, deriv, smooth, recip)
+        gv = stencil_derivative(D, v, u, one, zero, deriv, smooth, recip)
     if not (gu == gu and gv == gv):
         return np.nan, np.nan, np.nan
     nx = fx * gu
