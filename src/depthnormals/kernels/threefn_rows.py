@@ -263,7 +263,7 @@ def _fd_row(z3, r3, up, down, eh, acol, b, c, mode, out_row, out_flag):
         r5 = cl[u]
         r6 = cc[u]
         r7 = cr[u]
-        p = 0
+        p = np.int64(0)  # not the literal 0: one compiled _slot, not two
         t0, k0, p = _slot((-gu - gv) * z0 * r0, r0, pinf, ninf, one, zero, p)
         t1, k1, p = _slot(-gv * z1 * r1, r1, pinf, ninf, one, zero, p)
         t2, k2, p = _slot((gu - gv) * z2 * r2, r2, pinf, ninf, one, zero, p)
