@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 #: Seconds of compilation on a cold numba cache (see ``depthnormals.commands._firstrun``).
-FIRST_RUN_S = 90
+FIRST_RUN_S = 80
 
 HELP = "print the 3F2N+ ablation tables (Table I / II of the paper) for a dataset folder"
 
