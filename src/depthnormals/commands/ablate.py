@@ -17,7 +17,7 @@ import numpy as np
 from ..datasets.analytic import analytic_frames
 
 #: Seconds of compilation on a cold numba cache (see ``depthnormals.commands._firstrun``).
-FIRST_RUN_S = 90
+FIRST_RUN_S = 80
 
 HELP = "print the 3F2N+ ablation tables (Table I / II of the paper) for a dataset folder"
 

@@ -19,7 +19,7 @@ HELP = ("time every estimator at 640x480 and 512x424, single thread and all core
 
 REF = "opencv-fals"
 #: Seconds of compilation on a cold numba cache (every method; see ``commands._firstrun``).
-FIRST_RUN_S = 150
+FIRST_RUN_S = 140
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

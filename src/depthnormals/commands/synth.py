@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 #: Seconds of compilation on a cold numba cache (the rasteriser; see ``commands._firstrun``).
-FIRST_RUN_S = 20
+FIRST_RUN_S = 5
 
 HELP = "render a synthetic benchmark: procedural indoor/outdoor scenes, clean and noisy depth"
 

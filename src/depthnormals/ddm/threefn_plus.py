@@ -66,15 +66,16 @@ def _plus_body(v0, v1, rows, cam, filters, select, crf_args, out, kout, want_k, 
     bx = np.empty(w, dtype=z.dtype)
     by = np.empty(w, dtype=z.dtype)
     bz = np.empty(w, dtype=z.dtype)
-    # CRF stage: selected rows (slot r % 4; slot 4: outside), similarities, k_q of a row
-    sel = np.full((5, 3, w + 2), np.nan, dtype=np.float32)
-    sim = np.zeros((5, w + 2), dtype=np.float32)
-    hsum = np.zeros((5, w), dtype=np.float32)
-    kq = np.empty(w)
-    work = scratch(w)
+    if crf:  # CRF stage: selected rows (slot r % 4; slot 4: outside), similarities, k_q of a
+        # row (under the constant flag: the first run without the CRF compiles none of it)
+        sel = np.full((5, 3, w + 2), np.nan, dtype=np.float32)
+        sim = np.zeros((5, w + 2), dtype=np.float32)
+        hsum = np.zeros((5, w), dtype=np.float32)
+        kq = np.empty(w)
+        work = scratch(w)
     pend = 0
     lag = 2 if crf else 1  # rows between computing a row and finishing one
-    prev = -1
+    prev = np.int64(-1)  # not the literal -1: row_normals would compile twice
     for r in range(max(v0 - lag, 0), min(v1 + lag, h + lag)):
         if r < h:
             s = r % 3

@@ -29,7 +29,7 @@ def _threefn_rows(v0, v1, rows, cam, filters, out):
     bx = np.empty(w, dtype=z.dtype)
     by = np.empty(w, dtype=z.dtype)
     bz = np.empty(w, dtype=z.dtype)
-    prev = -1
+    prev = np.int64(-1)  # not the literal -1: row_normals would compile twice
     for v in range(v0, v1):
         prev = row_normals(v, rows, cam, filters, scratch, prev, (bx, by, bz))
         for u in range(w):

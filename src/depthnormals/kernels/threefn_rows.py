@@ -37,6 +37,12 @@ RowScratch = namedtuple("RowScratch", ["steps", "flag", "cand"])
 NEIGHBOURS8 = np.array([[-1, -1], [-1, 0], [-1, 1], [0, -1], [0, 1], [1, -1], [1, 0], [1, 1]],
                        dtype=np.int64)
 
+# no-NaN/no-inf assumptions are never allowed: NaN marks invalid depth
+_FASTMATH = {"nsz", "contract", "arcp"}
+# The small helpers of the FD pass are compiled once each and called, not inlined by numba
+# (``inline="always"`` copies and re-types their body at every call: 8 + 19 copies cost about
+# 3 s of the first run); LLVM inlines them, with the same flags, into the same vector loop.
+_FD_HELPER = {"cache": True, "error_model": "numpy", "fastmath": _FASTMATH}
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -109,12 +115,12 @@ def central_tendency(c, n, mode):
     return s / (hi - lo)
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
+@nb.njit(**_FD_HELPER)
 def _cx(a, b):
     return (a if a < b else b), (b if a < b else a)
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
+@nb.njit(**_FD_HELPER)
 def median8_pair(a0, a1, a2, a3, a4, a5, a6, a7):
     """The 4th and 5th smallest of 8 values, by a branch-free sorting network."""
     a0, a2 = _cx(a0, a2)
@@ -151,8 +157,10 @@ def generic_normal(z, D, recip, v, u, fx, fy, cx, cy, deriv, smooth, roberts, mo
     if roberts:
         gu, gv = roberts_gradient(D, v, u)
     else:
-        gu = stencil_derivative(D, v, u, 0, 1, deriv, smooth, recip)
-        gv = stencil_derivative(D, v, u, 1, 0, deriv, smooth, recip)
+        zero = np.int64(0)  # not literals: one compiled stencil_derivative, not two
+        one = np.int64(1)
+        gu = stencil_derivative(D, v, u, zero, one, deriv, smooth, recip)
+        gv = stencil_derivative(D, v, u, one, zero, deriv, smooth, recip)
     if not (gu == gu and gv == gv):
         return np.nan, np.nan, np.nan
     nx = fx * gu
@@ -166,9 +174,6 @@ def generic_normal(z, D, recip, v, u, fx, fy, cx, cy, deriv, smooth, roberts, mo
         nz = central_tendency(cand, n, mode)
     return oriented_unit(nx, ny, nz, (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
 
-
-# no-NaN/no-inf assumptions are never allowed: NaN marks invalid depth
-_FASTMATH = {"nsz", "contract", "arcp"}
 
 
 @nb.njit(cache=True, error_model="numpy", fastmath=_FASTMATH)
@@ -195,7 +200,7 @@ def _right_edges(za, eh, one):
         eh[u] = one / (za[u + 1] - za[u])
 
 
-@nb.njit(cache=True, error_model="numpy", inline="always")
+@nb.njit(**_FD_HELPER)
 def _slot(t, r, pinf, ninf, one, zero, parity):
     """A candidate, or +-inf (alternating) when it is dropped.
 
@@ -258,7 +263,7 @@ def _fd_row(z3, r3, up, down, eh, acol, b, c, mode, out_row, out_flag):
         r5 = cl[u]
         r6 = cc[u]
         r7 = cr[u]
-        p = 0
+        p = np.int64(0)  # not the literal 0: one compiled _slot, not two
         t0, k0, p = _slot((-gu - gv) * z0 * r0, r0, pinf, ninf, one, zero, p)
         t1, k1, p = _slot(-gv * z1 * r1, r1, pinf, ninf, one, zero, p)
         t2, k2, p = _slot((gu - gv) * z2 * r2, r2, pinf, ninf, one, zero, p)
