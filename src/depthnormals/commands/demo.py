@@ -10,7 +10,7 @@ from pathlib import Path
 #: Top of the error colour scale of the demo picture (degrees).
 ERROR_VMAX_DEG = 30.0
 #: Seconds of compilation on a cold numba cache (see ``depthnormals.commands._firstrun``).
-FIRST_RUN_S = 20
+FIRST_RUN_S = 12
 
 HELP = ("render a built-in analytic scene, estimate its normals, print the error metrics and "
         "write a picture (depth | ground truth | estimate | angular error)")

@@ -20,7 +20,7 @@ HELP = "estimate the normals of depth images and write them (.npy, .png 16-bit, 
 #: Exit status when no pixel of the input depth is valid (see ``depthnormals --help``).
 EXIT_NO_VALID_PIXEL = 3
 #: Seconds of compilation on a cold numba cache (see ``depthnormals.commands._firstrun``).
-FIRST_RUN_S = 17
+FIRST_RUN_S = 12
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 #: Seconds of compilation on a cold numba cache, for 3f2n+ (see ``commands._firstrun``).
-FIRST_RUN_S = 20
+FIRST_RUN_S = 14
 
 HELP = ("evaluate estimators on a dataset: results.csv, summary tables, figures "
         "(resumes an interrupted run)")
