@@ -378,3 +378,23 @@ def test_3f2n_zero_gradient_next_to_a_step():
     z[2, 2] = 4.0  # one diagonal neighbour nearer: central differences at (1, 1) are 0
     n = three_filters_to_normal(z, (500.0, 500.0, 1.0, 1.0))
     np.testing.assert_array_equal(n[1, 1], [0.0, 0.0, -1.0])
+
+
+def test_shared_number_checkers():
+    """check_real / check_int: the one range checker of the module, box-fit, PCL and torch options."""
+    import math
+
+    from depthnormals._validate import check_int, check_real
+
+    assert check_real(np.float32(0.5), "x", minimum=0.0, maximum=1.0) == 0.5
+    assert check_real(math.inf, "gate", minimum=0.0, finite=False) == math.inf
+    for bad, exc in ((True, TypeError), ("1", TypeError), (math.inf, ValueError),
+                     (math.nan, ValueError), (-0.1, ValueError), (1.5, ValueError)):
+        with pytest.raises(exc, match="x must be"):
+            check_real(bad, "x", minimum=0.0, maximum=1.0)
+    with pytest.raises(ValueError, match=r"size must be finite and >= 2 \(PCL's default is 10\)"):
+        check_real(1.0, "size", minimum=2.0, hint="PCL's default is 10")
+    assert check_int(np.int64(3), "r", minimum=1, maximum=8) == 3
+    for bad, exc in ((True, TypeError), (2.0, TypeError), (0, ValueError), (9, ValueError)):
+        with pytest.raises(exc, match=r"r must"):
+            check_int(bad, "r", minimum=1, maximum=8)

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import math
 import numbers
 from typing import Any
 
 import numpy as np
 
-__all__ = ["check_choice", "check_depth", "check_normals", "check_positive"]
+__all__ = ["check_choice", "check_depth", "check_int", "check_normals", "check_positive", "check_real"]
 
 
 def check_positive(value: Any, name: str, *, allow_none: bool = False) -> float | None:
@@ -20,6 +21,36 @@ def check_positive(value: Any, name: str, *, allow_none: bool = False) -> float 
     if not np.isfinite(value) or value <= 0:
         raise ValueError(f"{name} must be finite and > 0; got {value!r}")
     return value
+
+
+def _bounds(minimum: float, maximum: float) -> str:
+    if maximum == math.inf:
+        return f">= {minimum:g}"
+    return f"in [{minimum:g}, {maximum:g}]"
+
+
+def check_real(value: Any, name: str, *, minimum: float = -math.inf, maximum: float = math.inf,
+               finite: bool = True, hint: str = "") -> float:
+    """Return ``value`` as a float in ``[minimum, maximum]`` (and finite unless ``finite`` is
+    False), else raise TypeError (not a real number) or ValueError (out of range). ``hint`` is
+    added to the message (e.g. the default a user may want)."""
+    where = _bounds(minimum, maximum) + (f" ({hint})" if hint else "")
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name} must be a real number {where}; got {type(value).__name__}")
+    value = float(value)
+    if (finite and not math.isfinite(value)) or not minimum <= value <= maximum:
+        raise ValueError(f"{name} must be {'finite and ' if finite else ''}{where}; got {value!r}")
+    return value
+
+
+def check_int(value: Any, name: str, *, minimum: int, maximum: int) -> int:
+    """Return ``value`` as an int in ``minimum..maximum``, else raise TypeError (not an
+    integer; bools are refused) or ValueError (out of range)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"{name} must be an integer in {minimum}..{maximum}; got {value!r}")
+    if not minimum <= int(value) <= maximum:
+        raise ValueError(f"{name} must be in {minimum}..{maximum}; got {value}")
+    return int(value)
 
 
 def check_choice(value: Any, name: str, choices: tuple[str, ...] | list[str]) -> str:

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import check_choice, check_normals
+from .._validate import check_choice, check_normals, check_real
 from ..kernels.depth import prepare, row_dtype
 from .auto import refine_auto
 from .correlation import CORRELATIONS, kendall_map
@@ -65,15 +65,6 @@ class ModuleOptions:
 
 def _empty(shape: tuple[int, ...]) -> np.ndarray:
     return np.empty((shape[0], shape[1], 3), dtype=np.float32)  # the kernels write every pixel
-
-
-def _check_real(value: Any, name: str, *, minimum: float = 0.0) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{name} must be a real number >= {minimum}; got {type(value).__name__}")
-    value = float(value)
-    if not np.isfinite(value) or value < minimum:
-        raise ValueError(f"{name} must be finite and >= {minimum}; got {value!r}")
-    return value
 
 
 def discontinuity_discrimination(normals: Any, depth: Any, K: Any, *,
@@ -260,8 +251,8 @@ def _options(*, curvature: str, correlation: str, crf: bool, sigma: float, lambd
     check_choice(footprint, "footprint", FOOTPRINTS)
     if not isinstance(crf, (bool, np.bool_)):
         raise TypeError(f"crf must be True or False; got {crf!r}")
-    sigma = _check_real(sigma, "sigma")
-    lam = _check_real(lambda_, "lambda_")
+    sigma = check_real(sigma, "sigma", minimum=0.0)
+    lam = check_real(lambda_, "lambda_", minimum=0.0)
     if isinstance(crf_iterations, bool) or not isinstance(crf_iterations, numbers.Integral):
         raise TypeError(f"crf_iterations must be an integer >= 1; got {crf_iterations!r}")
     if crf_iterations < 1:
@@ -273,7 +264,7 @@ def _options(*, curvature: str, correlation: str, crf: bool, sigma: float, lambd
         raise ValueError("the CRF weights its edges by the depth curvature k_q: pass a curvature "
                          "other than 'none', or crf=False for a correlation-only selection")
     check_choice(selection, "selection", SELECTIONS)
-    sw = _check_real(self_weight, "self_weight")
+    sw = check_real(self_weight, "self_weight", minimum=0.0)
     if not 0.0 < sw <= 1.0:
         raise ValueError(f"self_weight must be in (0, 1]; got {self_weight!r}")
     if isinstance(fit_radius, bool) or not isinstance(fit_radius, numbers.Integral):
@@ -281,7 +272,7 @@ def _options(*, curvature: str, correlation: str, crf: bool, sigma: float, lambd
     if not 1 <= fit_radius <= 3:
         raise ValueError(f"fit_radius must be in 1..3; got {fit_radius}")
     if consistency is not None:
-        consistency = _check_real(consistency, "consistency")
+        consistency = check_real(consistency, "consistency", minimum=0.0)
     return {"curvature": curvature, "correlation": correlation, "crf": bool(crf),
             "sigma": sigma, "lam": lam, "iterations": int(crf_iterations),
             "neighbourhood": neighbourhood, "derivatives": derivatives, "slope": slope,

@@ -41,6 +41,7 @@ import numba as nb
 import numpy as np
 
 from .._parallel import run_rows
+from .._validate import check_int, check_real
 from ..kernels.depth import prepare
 from ..kernels.orient import store_normal
 
@@ -455,23 +456,6 @@ def box_fit_from_prepared(z: np.ndarray, fx: float, fy: float, cx: float, cy: fl
     return out
 
 
-def _check_int(value: Any, name: str, lo: int, hi: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{name} must be an integer in {lo}..{hi}; got {value!r}")
-    if not lo <= value <= hi:
-        raise ValueError(f"{name} must be in {lo}..{hi}; got {value}")
-    return int(value)
-
-
-def _check_float(value: Any, name: str, lo: float, hi: float) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{name} must be a real number in [{lo}, {hi}]; got {value!r}")
-    value = float(value)
-    if not lo <= value <= hi:
-        raise ValueError(f"{name} must be in [{lo}, {hi}]; got {value!r}")
-    return value
-
-
 def box_fit_normals(depth: Any, K: Any, *, radius: int = 2, shift: int | None = None,
                     gate: float = 0.0, self_weight: float = 1.0, big_radius: int = 0,
                     sigma: float | None = None, depth_scale: float | None = None) -> np.ndarray:
@@ -521,12 +505,12 @@ def box_fit_normals(depth: Any, K: Any, *, radius: int = 2, shift: int | None = 
     >>> bool(np.abs(n - r.normals).max() < 1e-5)
     True
     """
-    rad = _check_int(radius, "radius", 1, 8)
-    sh = rad if shift is None else _check_int(shift, "shift", 0, rad)
-    g = _check_float(gate, "gate", 0.0, np.inf)
-    sw = _check_float(self_weight, "self_weight", 0.0, 1.0)
-    big = _check_int(big_radius, "big_radius", 0, 16)
-    sg = None if sigma is None else _check_float(sigma, "sigma", 0.0, np.inf)
+    rad = check_int(radius, "radius", minimum=1, maximum=8)
+    sh = rad if shift is None else check_int(shift, "shift", minimum=0, maximum=rad)
+    g = check_real(gate, "gate", minimum=0.0, finite=False)
+    sw = check_real(self_weight, "self_weight", minimum=0.0, maximum=1.0)
+    big = check_int(big_radius, "big_radius", minimum=0, maximum=16)
+    sg = None if sigma is None else check_real(sigma, "sigma", minimum=0.0, finite=False)
     if sg == 0.0:
         raise ValueError("sigma must be > 0 (or None)")
     if sw == 0.0:

@@ -23,15 +23,13 @@ Kernels: :func:`_distance_units` (the depth-change map and chamfer distance, one
 
 from __future__ import annotations
 
-import math
-import numbers
 from typing import Any
 
 import numba as nb
 import numpy as np
 
 from .._parallel import run_rows
-from .._validate import check_choice
+from .._validate import check_choice, check_real
 from ..kernels.depth import prepare
 from ..kernels.eig3 import smallest_eigenvector
 from ..kernels.orient import store_normal
@@ -430,28 +428,6 @@ def _normals_rows(v0, v1, z, units, I, fx, fy, cx, cy, mode, size, depth_depende
 
 # ----------------------------------------------------------------------------- public API
 
-def _check_smoothing(value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise TypeError(f"normal_smoothing_size must be a real number >= 2 (PCL's default is 10); "
-                        f"got {type(value).__name__}")
-    value = float(value)
-    if not (math.isfinite(value) and value >= 2.0):
-        raise ValueError(f"normal_smoothing_size must be finite and >= 2 (PCL's default is 10); "
-                         f"got {value!r}")
-    return value
-
-
-def _check_factor(value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise TypeError(f"max_depth_change_factor must be a real number >= 0 (PCL's default is "
-                        f"0.02); got {type(value).__name__}")
-    value = float(value)
-    if not (math.isfinite(value) and value >= 0.0):
-        raise ValueError(f"max_depth_change_factor must be finite and >= 0 (PCL's default is "
-                         f"0.02); got {value!r}")
-    return value
-
-
 def distance_map(depth: Any, *, max_depth_change_factor: float = 0.02,
                  depth_scale: float | None = None) -> np.ndarray:
     """PCL's depth-change distance map: chamfer distance (pixels) to the nearest depth jump.
@@ -473,7 +449,8 @@ def distance_map(depth: Any, *, max_depth_change_factor: float = 0.02,
         distance (straight step 1, diagonal step 1.4) to the nearest of them; ``H + W`` when
         there is none.
     """
-    factor = _check_factor(max_depth_change_factor)
+    factor = check_real(max_depth_change_factor, "max_depth_change_factor", minimum=0.0,
+                        hint="PCL's default is 0.02")
     z, _ = prepare(depth, (1.0, 1.0, 0.0, 0.0), depth_scale)
     units = np.empty(z.shape, dtype=np.int64)
     _distance_units(z, factor, units)
@@ -586,8 +563,10 @@ def pcl_integral_image(depth: Any, K: Any, *, mode: str = "average-3d-gradient",
     """
     mode = check_choice(mode, "mode", MODES)
     policy = check_choice(border_policy, "border_policy", BORDER_POLICIES)
-    factor = _check_factor(max_depth_change_factor)
-    size = _check_smoothing(normal_smoothing_size)
+    factor = check_real(max_depth_change_factor, "max_depth_change_factor", minimum=0.0,
+                        hint="PCL's default is 0.02")
+    size = check_real(normal_smoothing_size, "normal_smoothing_size", minimum=2.0,
+                      hint="PCL's default is 10")
     if not isinstance(depth_dependent_smoothing, (bool, np.bool_)):
         raise TypeError(f"depth_dependent_smoothing must be True or False; got "
                         f"{depth_dependent_smoothing!r}")

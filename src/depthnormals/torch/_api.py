@@ -9,6 +9,7 @@ from typing import Any
 import torch
 from torch import nn
 
+from .._validate import check_int, check_real
 from ._common import Grid, finish, prepare
 from ._d2nt import VARIANTS, d2nt
 from ._ddm import refine
@@ -91,23 +92,6 @@ def _check_method(method: Any) -> str:
     return method.rstrip("+")
 
 
-def _real(value: Any, name: str, minimum: float) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{name} must be a real number >= {minimum}; got {type(value).__name__}")
-    value = float(value)
-    if not (value >= minimum and value < float("inf")):
-        raise ValueError(f"{name} must be finite and >= {minimum}; got {value!r}")
-    return value
-
-
-def _integer(value: Any, name: str, lo: int, hi: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{name} must be an integer in {lo}..{hi}; got {value!r}")
-    if not lo <= int(value) <= hi:
-        raise ValueError(f"{name} must be in {lo}..{hi}; got {value}")
-    return int(value)
-
-
 def _check_options(method: str, options: dict[str, Any]) -> dict[str, Any]:
     """Options of ``method`` merged over its defaults, validated and normalised."""
     defaults = method_defaults(method)
@@ -152,16 +136,16 @@ def _check_options(method: str, options: dict[str, Any]) -> dict[str, Any]:
 def _check_module(o: dict[str, Any]) -> None:
     if not isinstance(o["crf"], bool):
         raise TypeError(f"crf must be True or False; got {o['crf']!r}")
-    o["sigma"] = _real(o["sigma"], "sigma", 0.0)
-    o["lam"] = _real(o.pop("lambda_"), "lambda_", 0.0)
-    o["iterations"] = _integer(o.pop("crf_iterations"), "crf_iterations", 1, 10**6)
-    o["fit_radius"] = _integer(o["fit_radius"], "fit_radius", 1, 3)
-    sw = _real(o["self_weight"], "self_weight", 0.0)
+    o["sigma"] = check_real(o["sigma"], "sigma", minimum=0.0)
+    o["lam"] = check_real(o.pop("lambda_"), "lambda_", minimum=0.0)
+    o["iterations"] = check_int(o.pop("crf_iterations"), "crf_iterations", minimum=1, maximum=10**6)
+    o["fit_radius"] = check_int(o["fit_radius"], "fit_radius", minimum=1, maximum=3)
+    sw = check_real(o["self_weight"], "self_weight", minimum=0.0)
     if not 0.0 < sw <= 1.0:
         raise ValueError(f"self_weight must be in (0, 1]; got {o['self_weight']!r}")
     o["self_weight"] = sw
     if o["consistency"] is not None:
-        o["consistency"] = _real(o["consistency"], "consistency", 0.0)
+        o["consistency"] = check_real(o["consistency"], "consistency", minimum=0.0)
     if o["crf"] and o["curvature"] == "none":
         raise ValueError("the CRF weights its edges by the depth curvature k_q: pass a curvature "
                          "other than 'none', or crf=False for a correlation-only selection")
