@@ -71,16 +71,77 @@ RESTART = 64
 _R_N, _R_U, _R_UU, _R_W, _R_UW, _R_WW = range(6)
 
 
+#: The row sums run in this many interleaved segments (independent recurrences side by side).
+SEGMENTS = 4
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always", fastmath=_FASTMATH)
+def _seg_start(xm, xw, s, r, o):
+    """Direct row sums of the window centred at pixel ``s`` (the start of a segment)."""
+    t0m = 0.0
+    t1m = 0.0
+    t2m = 0.0
+    t0w = 0.0
+    t1w = 0.0
+    t0q = 0.0
+    for k in range(-r, r + 1):
+        m = xm[s + k + o]
+        x = xw[s + k + o]
+        t0m += m
+        t1m += k * m
+        t2m += k * k * m
+        t0w += x
+        t1w += k * x
+        t0q += x * x
+    return t0m, t1m, t2m, t0w, t1w, t0q
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always", fastmath=_FASTMATH)
+def _seg_step(st, xm, xw, u, r):
+    """The six row sums at pixel ``u`` from those at ``u - 1`` (recurrences of :func:`_row_sums`)."""
+    t0m, t1m, t2m, t0w, t1w, t0q = st
+    rf = np.float64(r)
+    r1 = rf + 1.0
+    em = xm[u + 2 * r + 1]
+    lm = xm[u]
+    ew = xw[u + 2 * r + 1]
+    lw = xw[u]
+    n0 = t0m + em - lm
+    s1 = t1m + rf * lm + r1 * em
+    t2m = t2m - rf * rf * lm + r1 * r1 * em - 2.0 * s1 + n0
+    t1m = s1 - n0
+    t0m = n0
+    n0 = t0w + ew - lw
+    t1w = t1w + rf * lw + r1 * ew - n0
+    t0w = n0
+    t0q = t0q + ew * ew - lw * lw
+    return t0m, t1m, t2m, t0w, t1w, t0q
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _seg_put(out_rs, u, w, st):
+    if u < w:
+        out_rs[_R_N, u] = st[0]
+        out_rs[_R_U, u] = st[1]
+        out_rs[_R_UU, u] = st[2]
+        out_rs[_R_W, u] = st[3]
+        out_rs[_R_UW, u] = st[4]
+        out_rs[_R_WW, u] = st[5]
+
+
 @nb.njit(cache=True, nogil=True, error_model="numpy", fastmath=_FASTMATH)
 def _row_sums(zrow, r, xm, xw, out_rs):
     """The six row sums of one depth row (``zrow``, NaN invalid) for half-width ``r``, as
-    running sums: O(1) per pixel whatever ``r``. ``xm``, ``xw`` (W + 2 r + 2) scratch whose
-    border cells stay 0 (pixel u at index u + r + 1); writes ``out_rs`` (6, W).
+    running sums: O(1) per pixel whatever ``r``. ``xm``, ``xw`` scratch of at least
+    ``SEGMENTS ceil(W / SEGMENTS) + 2 r + 2`` (pixel u at index u + r + 1; the rest is zeroed
+    here); writes ``out_rs`` (6, W).
 
     Moving the window from u to u + 1 (entering value e, leaving value l, sums over the
     local offsets k of ``x``, ``k x``, ``k^2 x``): ``T0' = T0 + e - l``,
     ``T1' = T1 + r l + (r + 1) e - T0'``,
     ``T2' = T2 - r^2 l + (r + 1)^2 e - 2 (T1 + r l + (r + 1) e) + T0'``.
+    The row runs as :data:`SEGMENTS` segments side by side, each started by direct sums, so
+    the recurrences do not wait on each other (the rounding depends only on the column).
     """
     w = zrow.size
     o = r + 1
@@ -89,44 +150,27 @@ def _row_sums(zrow, r, xm, xw, out_rs):
         ok = zz == zz
         xw[u + o] = 1.0 / zz if ok else 0.0
         xm[u + o] = 1.0 if ok else 0.0
-    t0m = 0.0
-    t1m = 0.0
-    t2m = 0.0
-    t0w = 0.0
-    t1w = 0.0
-    t0q = 0.0
-    for k in range(-r, r + 1):
-        m = xm[k + o]
-        x = xw[k + o]
-        t0m += m
-        t1m += k * m
-        t2m += k * k * m
-        t0w += x
-        t1w += k * x
-        t0q += x * x
-    rf = np.float64(r)
-    r1 = rf + 1.0
-    for u in range(w):
-        if u > 0:
-            em = xm[u + 2 * r + 1]
-            lm = xm[u]
-            ew = xw[u + 2 * r + 1]
-            lw = xw[u]
-            n0 = t0m + em - lm
-            s1 = t1m + rf * lm + r1 * em
-            t2m = t2m - rf * rf * lm + r1 * r1 * em - 2.0 * s1 + n0
-            t1m = s1 - n0
-            t0m = n0
-            n0 = t0w + ew - lw
-            t1w = t1w + rf * lw + r1 * ew - n0
-            t0w = n0
-            t0q = t0q + ew * ew - lw * lw
-        out_rs[_R_N, u] = t0m
-        out_rs[_R_U, u] = t1m
-        out_rs[_R_UU, u] = t2m
-        out_rs[_R_W, u] = t0w
-        out_rs[_R_UW, u] = t1w
-        out_rs[_R_WW, u] = t0q
+    for u in range(w + o, xm.size):
+        xw[u] = 0.0
+        xm[u] = 0.0
+    seg = (w + SEGMENTS - 1) // SEGMENTS
+    a = _seg_start(xm, xw, 0, r, o)
+    b = _seg_start(xm, xw, seg, r, o)
+    c = _seg_start(xm, xw, 2 * seg, r, o)
+    d = _seg_start(xm, xw, 3 * seg, r, o)
+    _seg_put(out_rs, 0, w, a)
+    _seg_put(out_rs, seg, w, b)
+    _seg_put(out_rs, 2 * seg, w, c)
+    _seg_put(out_rs, 3 * seg, w, d)
+    for t in range(1, seg):
+        a = _seg_step(a, xm, xw, t, r)
+        b = _seg_step(b, xm, xw, seg + t, r)
+        c = _seg_step(c, xm, xw, 2 * seg + t, r)
+        d = _seg_step(d, xm, xw, 3 * seg + t, r)
+        _seg_put(out_rs, t, w, a)
+        _seg_put(out_rs, seg + t, w, b)
+        _seg_put(out_rs, 2 * seg + t, w, c)
+        _seg_put(out_rs, 3 * seg + t, w, d)
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -173,11 +217,25 @@ def _solve_row(t0, t1m0, t1m1, t1w, t2m0, fx, fy, acol, bv, out_x, out_y, out_z,
         good = ok & (c > 0.0)
         s = 1.0 / np.sqrt(nx * nx + ny * ny + nz * nz)
         s = -s if nx * au * ifx + ny * bv * ify + nz > 0.0 else s
-        zc = fx / c
         out_x[u] = nx * s if good else nan
         out_y[u] = ny * s if good else nan
         out_z[u] = nz * s if good else nan
-        out_s[u] = rss / (n - 3.0) * zc * zc if good else inf
+        out_s[u] = rss * (fx * fx) / ((n - 3.0) * c * c) if good else inf
+        out_a[u] = a
+        out_b[u] = b
+        out_c[u] = c
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", fastmath=_FASTMATH)
+def _solve_row_planes(t0, t1m0, t1m1, t1w, t2m0, fx, out_s, out_a, out_b, out_c):
+    """:func:`_solve_row` without the normals (residual variances and planes only)."""
+    inf = np.inf
+    for u in range(out_s.size):
+        n = t0[_R_N, u]
+        a, b, c, rss, ok = solve_window(n, t0[_R_U, u], t1m0[u], t0[_R_UU, u], t1m1[u], t2m0[u],
+                                        t0[_R_W, u], t0[_R_UW, u], t1w[u], t0[_R_WW, u])
+        good = ok & (c > 0.0)
+        out_s[u] = rss * (fx * fx) / ((n - 3.0) * c * c) if good else inf
         out_a[u] = a
         out_b[u] = b
         out_c[u] = c
@@ -200,8 +258,8 @@ def _fit_rows(v0, v1, z, fx, fy, cx, cy, r, out_n, out_score, out_plane, want_pl
     span = 2 * r + 2
     ring = np.zeros((span, 6, w))
     zero = np.zeros((6, w))
-    xm = np.zeros(w + 2 * r + 2)
-    xw = np.zeros(w + 2 * r + 2)
+    xm = np.zeros(SEGMENTS * ((w + SEGMENTS - 1) // SEGMENTS) + 2 * r + 2)
+    xw = np.zeros_like(xm)
     t0 = np.zeros((6, w))
     t1m0 = np.zeros(w)
     t1m1 = np.zeros(w)
@@ -263,10 +321,13 @@ def _fit_rows(v0, v1, z, fx, fy, cx, cy, r, out_n, out_score, out_plane, want_pl
                 t0[_R_WW, u] += e[_R_WW, u] - lv[_R_WW, u]
         if v < v0:  # rows before the band: only to carry the running sums to v0
             continue
-        vn = v if want_n else 0
-        _solve_row(t0, t1m0, t1m1, t1w, t2m0, fx, fy, acol, v - cy, nn[0, vn], nn[1, vn],
-                   nn[2, vn], out_score[v], pl[0, v if want_plane else 0], pl[1, v if want_plane else 0],
-                   pl[2, v if want_plane else 0])
+        vp = v if want_plane else 0
+        if want_n:
+            _solve_row(t0, t1m0, t1m1, t1w, t2m0, fx, fy, acol, v - cy, nn[0, v], nn[1, v], nn[2, v],
+                       out_score[v], pl[0, vp], pl[1, vp], pl[2, vp])
+        else:
+            _solve_row_planes(t0, t1m0, t1m1, t1w, t2m0, fx, out_score[v], pl[0, vp], pl[1, vp],
+                              pl[2, vp])
 
 
 def box_fit_windows(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
@@ -338,8 +399,14 @@ def _choose_local_rows(v0, v1, z, score, plane, big_n, big_score, shift, gate, b
     fx, fy, cx, cy = cam
     h, w = z.shape
     sd = math.sqrt(inv_var)
-    pw = np.empty(9)
-    ps = np.empty(9)
+    fsd = fx * sd
+    pz = np.empty(9)
+    ka = np.empty(9)
+    kb = np.empty(9)
+    kc = np.empty(9)
+    sk = np.empty(9)
+    kv = np.empty(9, dtype=np.int64)
+    ku = np.empty(9, dtype=np.int64)
     pu = np.empty(9)
     pv = np.empty(9)
     nan = np.nan
@@ -356,7 +423,7 @@ def _choose_local_rows(v0, v1, z, score, plane, big_n, big_score, shift, gate, b
             bv = v
             bu = u
             if not (np.float64(score[v, u]) <= gate):
-                m = 0  # the valid pixels of the 3x3: inverse depth, footprint scale, position
+                m = 0  # the valid pixels of the 3x3: depth and position
                 for dv in range(-1, 2):
                     a = v + dv
                     if a < 0 or a >= h:
@@ -367,12 +434,11 @@ def _choose_local_rows(v0, v1, z, score, plane, big_n, big_score, shift, gate, b
                             continue
                         zp = np.float64(z[a, b])
                         if zp == zp:
-                            pw[m] = 1.0 / zp
-                            ps[m] = fx * zp * sd
+                            pz[m] = zp
                             pu[m] = b
                             pv[m] = a
                             m += 1
-                best = np.inf
+                nk = 0  # the nine windows' planes, then their scores side by side
                 for k in range(SHIFTS.shape[0]):
                     r = v + shift * SHIFTS[k, 0]
                     c = u + shift * SHIFTS[k, 1]
@@ -380,16 +446,27 @@ def _choose_local_rows(v0, v1, z, score, plane, big_n, big_score, shift, gate, b
                         continue
                     pa = np.float64(plane[0, r, c])
                     pb = np.float64(plane[1, r, c])
-                    pc = np.float64(plane[2, r, c]) - pa * c - pb * r
-                    sk = 0.0
-                    for i in range(m):
-                        res = (pw[i] - (pa * pu[i] + pb * pv[i] + pc)) * ps[i]
+                    ka[nk] = pa
+                    kb[nk] = pb
+                    kc[nk] = np.float64(plane[2, r, c]) - pa * c - pb * r
+                    kv[nk] = r
+                    ku[nk] = c
+                    sk[nk] = 0.0
+                    nk += 1
+                for i in range(m):  # (1/z - plane) (fx z / sigma) = fx / sigma - z plane fx / sigma
+                    zi = pz[i] * fsd
+                    ui = pu[i]
+                    vi = pv[i]
+                    for j in range(nk):  # independent sums: no serial chain
+                        res = fsd - zi * (ka[j] * ui + kb[j] * vi + kc[j])
                         e = res * res
-                        sk += e if e < cap else cap
-                    if sk < best:
-                        best = sk
-                        bv = r
-                        bu = c
+                        sk[j] += e if e < cap else cap
+                best = np.inf
+                for j in range(nk):  # the first of equal scores wins (the centred window)
+                    if sk[j] < best:
+                        best = sk[j]
+                        bv = kv[j]
+                        bu = ku[j]
                 if not (best < np.inf):
                     out[v, u, 0] = np.nan
                     out[v, u, 1] = np.nan
