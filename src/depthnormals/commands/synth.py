@@ -19,7 +19,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="master seed (default 0)")
     parser.add_argument("--noise", default="kinect_v2",
                         help="comma-separated noise models, each MODEL[:KEY=VALUE...]: gaussian "
-                             "(sigma=M or sigma_px=X, default sigma_px=0.1), kinect_v1, kinect_v2; "
+                             "(sigma=M or sigma_px=X, default sigma_px=0.1), kinect_v1, kinect_v2, "
+                             "realsense_d4xx (e.g. realsense_d4xx:baseline=0.055), tof; "
                              "'none' for clean only (default kinect_v2)")
     parser.add_argument("--mesh", action="append", default=[], type=Path, metavar="FILE",
                         help="add a user mesh scene (OBJ, PLY, STL, GLB; needs trimesh); repeatable")

@@ -19,6 +19,8 @@ from .noise import (
     kinect_v2_noise,
     noise_std,
     parse_noise_spec,
+    realsense_d4xx_noise,
+    tof_noise,
 )
 from .poses import PoseConstraints, check_view, sample_poses
 from .scenes import Scene, load_mesh_scene, make_scene, scene_names
@@ -41,6 +43,8 @@ __all__ = [
     "make_scene",
     "noise_std",
     "parse_noise_spec",
+    "realsense_d4xx_noise",
     "sample_poses",
     "scene_names",
+    "tof_noise",
 ]

@@ -94,6 +94,12 @@ def _apply_model(name: str, st: dict, r, scene: Scene, pose, cam, size, near, rn
     if name == "kinect_v1":
         return _noise.kinect_v1_noise(r.depth, r.normals, cam, rng=rng, focal=st["focal"],
                                       baseline=st["baseline"], subpixel=st["subpixel"])
+    if name == "realsense_d4xx":
+        return _noise.realsense_d4xx_noise(r.depth, r.normals, cam, rng=rng, **st)
+    if name == "tof":
+        sub = _subsamples(st["supersample"], r, scene, pose, cam, size, near)
+        return _noise.tof_noise(r.depth, r.normals, cam, rng=rng, subsamples=sub,
+                                **{k: v for k, v in st.items() if k != "supersample"})
     s = st["supersample"]
     sub = None
     if s > 1:
@@ -104,3 +110,12 @@ def _apply_model(name: str, st: dict, r, scene: Scene, pose, cam, size, near, rn
                                   min_range=st["min_range"], max_range=st["max_range"],
                                   dropout_deg=st["dropout_deg"],
                                   dropout_width_deg=st["dropout_width_deg"], rounding=st["rounding"])
+
+
+def _subsamples(factor: int, r, scene: Scene, pose, cam, size, near) -> np.ndarray | None:
+    """Sub-pixel depth near discontinuities (flying pixels), None for ``factor`` 1."""
+    if factor <= 1:
+        return None
+    h, w = size
+    return render_subsamples(scene.vertices, scene.faces, cam, pose=pose, width=w, height=h,
+                             factor=factor, mask=_noise.discontinuity_mask(r.depth), near=near)
