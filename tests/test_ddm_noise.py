@@ -271,3 +271,70 @@ def test_estimate_noise_is_public_and_documented():
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
     assert "estimate_noise" in readme
     assert "estimate_noise" in (Path(__file__).resolve().parents[1] / "docs" / "3f2n-plus.md").read_text()
+
+
+# --- per-region noise (issue 13: "per image or per region") -------------------------------
+
+def _two_level_plane(left: float, right: float, seed: int = 0):
+    r = tilted_plane().render()
+    s = np.where(np.arange(r.depth.shape[1]) < 320, left, right)[None, :]
+    d = r.depth + np.random.default_rng(seed).normal(size=r.depth.shape) * s * r.depth / r.K.fx
+    return r, d
+
+
+def test_noise_map_reads_each_region_level():
+    r, d = _two_level_plane(0.1, 0.4)
+    m = dn.estimate_noise_map(d, r.K)
+    assert m.shape == d.shape and m.dtype == np.float32
+    # tiles wholly left of column 320 read 0.1, wholly right 0.4: each a median of ~340
+    # samples (~8 % standard error), so every tile within 35 % and their median within 5 %
+    left, right = m[::64, :256:64], m[::64, 384::64]
+    assert np.allclose(left, 0.1, rtol=0.35) and np.allclose(right, 0.4, rtol=0.35)
+    assert abs(np.median(left) - 0.1) < 0.005 and abs(np.median(right) - 0.4) < 0.02
+    # the image's level lies between the two
+    assert 0.1 * 1.15 < dn.estimate_noise(d, r.K) < 0.4 * 0.85
+
+
+def test_noise_map_falls_back_to_the_image_level_and_rejects_bad_tiles():
+    r, d = _two_level_plane(0.2, 0.2)
+    d[:, :64] = 0.0  # a column of tiles with no valid triple
+    m = dn.estimate_noise_map(d, r.K, tile=32)
+    assert np.all(m[:, :64] == np.float32(dn.estimate_noise(d, r.K)))
+    rest = m[:, 96:]  # ~100 samples a 32x32 tile: ~13 % standard error
+    assert 0.1 < rest.min() and rest.max() < 0.4 and abs(np.median(rest) - 0.2) < 0.02
+    for bad in (4, 7.5, True, "64"):
+        with pytest.raises(ValueError, match="tile"):
+            dn.estimate_noise_map(d, r.K, tile=bad)
+
+
+def test_box_fit_with_one_tile_level_equals_the_global_level():
+    from depthnormals.ddm.boxfit import box_fit_from_prepared
+
+    r = box_on_floor().render(shape=(120, 160), K=K_SMALL)
+    d = _noisy(r.depth, K_SMALL[0], 0.2, seed=3)
+    z, cam = prepare(d, r.K, None)
+    args = (z, cam.fx, cam.fy, cam.cx, cam.cy)
+    kw = {"radius": 2, "shift": 2, "gate": 0.12, "self_weight": 1.0, "big_radius": 6, "sigma": 0.2}
+    plain = box_fit_from_prepared(*args, **kw)
+    same = box_fit_from_prepared(*args, **kw, sigma_tiles=(np.full((2, 3), 0.2), 64))
+    assert np.array_equal(plain, same, equal_nan=True)
+    # NaN tiles read as the global level too; another level changes the answer
+    nan_tiles = box_fit_from_prepared(*args, **kw, sigma_tiles=(np.full((2, 3), np.nan), 64))
+    assert np.array_equal(plain, nan_tiles, equal_nan=True)
+    other = box_fit_from_prepared(*args, **kw, sigma_tiles=(np.full((2, 3), 0.05), 64))
+    assert not np.array_equal(plain, other, equal_nan=True)
+
+
+def test_local_noise_beats_one_level_where_the_noise_changes_across_the_image():
+    # a step whose near half is noisier (as a Kinect's near range): the per-tile level keeps the
+    # noisy half's large windows and the quiet half's edges
+    r = make_scene("stairs").render()
+    s = np.where(np.arange(r.depth.shape[1]) < 320, 0.05, 0.4)[None, :]
+    d = r.depth + np.random.default_rng(1).normal(size=r.depth.shape) * s * r.depth / r.K.fx
+    z, cam = prepare(d, r.K, None)
+    sigma = dn.estimate_noise(d, r.K)
+    local = box_select(z, None, cam.fx, cam.fy, cam.cx, cam.cy, sigma)
+    one = box_select(z, None, cam.fx, cam.fy, cam.cx, cam.cy, sigma, local=False)
+    e_local, e_one = (dn.normal_metrics(n, r.normals).mean for n in (local, one))
+    assert e_local < 0.97 * e_one, (e_local, e_one)
+    assert np.array_equal(dn.estimate_normals(d, r.K), local, equal_nan=True)

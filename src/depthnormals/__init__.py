@@ -19,6 +19,7 @@ from .camera import Intrinsics, as_intrinsics, backproject
 from .ddm import (
     discontinuity_discrimination,
     estimate_noise,
+    estimate_noise_map,
 )
 from .estimators import (
     angle_weighted,
@@ -56,6 +57,7 @@ __all__ = [
     "datasets",
     "discontinuity_discrimination",
     "estimate_noise",
+    "estimate_noise_map",
     "estimate_normals",
     "fals",
     "get_estimator",

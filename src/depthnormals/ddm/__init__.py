@@ -16,7 +16,7 @@ from ._module import (
 from .boxfit import box_fit_normals
 from .correlation import CORRELATIONS, kendall_map
 from .curvature import CURVATURES, DERIVATIVES, depth_curvature
-from .noise import estimate_noise
+from .noise import estimate_noise, estimate_noise_map
 from .threefn_plus import fused_plus
 
 __all__ = [
@@ -30,6 +30,7 @@ __all__ = [
     "depth_curvature",
     "discontinuity_discrimination",
     "estimate_noise",
+    "estimate_noise_map",
     "fused_plus",
     "kendall_map",
     "module_defaults",

@@ -35,7 +35,7 @@ import numpy as np
 from .._parallel import run_rows
 from ..kernels.orient import store_normal
 from .boxfit import box_fit_from_prepared
-from .noise import noise_from_prepared
+from .noise import TILE, noise_from_prepared, noise_tiles
 
 __all__ = ["AUTO_CONSISTENCY", "BIG_RADIUS", "GATE", "KEEP_CHI2", "MAX_RADIUS", "NOISE_CLEAN",
            "TARGET_STD", "auto_fused", "box_radius", "box_select", "refine_auto"]
@@ -129,19 +129,28 @@ def _keep_rows(v0, v1, z, base, kappa, fx, fy, cx, cy, out):
 
 
 def box_select(z: np.ndarray, base: np.ndarray | None, fx: float, fy: float, cx: float,
-               cy: float, sigma: float, *, keep_chi2: float | None = None) -> np.ndarray:
+               cy: float, sigma: float, *, keep_chi2: float | None = None,
+               local: bool = True) -> np.ndarray:
     """The box-fit branch on prepared depth ``z``: normals (H, W, 3) float32.
 
     With ``base`` (the estimator's normals): NaN where it has none, and its normal kept
     where it agrees with the box-fit within the fit's noise: the squared distance of their
     inverse-depth slopes, in units of the fitted slope's variance ``sigma_w^2 / S_uu``
     (``sigma_w = sigma / (fx z)``, ``S_uu = N r (r + 1) / 3`` of a full window), below
-    ``keep_chi2`` (default :data:`KEEP_CHI2`; a chi-square with 2 degrees of freedom)."""
+    ``keep_chi2`` (default :data:`KEEP_CHI2`; a chi-square with 2 degrees of freedom).
+
+    With ``local`` (default), the plane tests use the noise of the pixel's 64x64 tile
+    (:func:`depthnormals.ddm.noise.noise_tiles`, at least :data:`NOISE_CLEAN`) instead of the
+    image's ``sigma``; the window radius follows ``sigma``."""
     r = box_radius(sigma)
     gate = GATE * sigma * sigma if sigma == sigma else 0.0
+    noisy = sigma == sigma and sigma > 0.0
+    tiles = None
+    if noisy and local:
+        tiles = (np.maximum(noise_tiles(z, fx, fy, tile=TILE), NOISE_CLEAN), TILE)
     out = box_fit_from_prepared(z, fx, fy, cx, cy, radius=r, shift=r, gate=gate, self_weight=1.0,
-                                big_radius=max(BIG_RADIUS, r),
-                                sigma=sigma if sigma == sigma and sigma > 0.0 else None)
+                                big_radius=max(BIG_RADIUS, r), sigma=sigma if noisy else None,
+                                sigma_tiles=tiles)
     if base is not None:
         k2 = KEEP_CHI2 if keep_chi2 is None else float(keep_chi2)
         suu = (2 * r + 1) ** 2 * r * (r + 1) / 3.0

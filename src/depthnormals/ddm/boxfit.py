@@ -391,15 +391,22 @@ def _choose_rows(v0, v1, z, fit_n, score, big_n, big_score, shift, gate, big_gat
 
 
 @nb.njit(**_JIT)
-def _choose_local_rows(v0, v1, z, score, plane, big_n, big_score, shift, gate, big_gate, inv_var,
-                       cap, cam, out):
+def _choose_local_rows(v0, v1, z, score, plane, big_n, big_score, shift, gates, tiles, cap, cam,
+                       out):
     """Rows of :func:`choose_windows` with ``plane``: among the nine windows the one whose plane
     explains the pixel's own 3x3 best (truncated squared residuals in noise units).
+    ``gates`` is ``(gate, big_gate, inv_var)`` at the reference noise; ``tiles`` is
+    ``(scale, tile)``: the variance of each ``tile x tile`` tile over the reference (a (1, 1)
+    map of 1 with a tile over the image: one level), scaling the three per pixel.
     ``cam`` is ``(fx, fy, cx, cy)``; writes ``out`` rows ``v0 .. v1 - 1``."""
     fx, fy, cx, cy = cam
+    gate0, big_gate0, inv_var = gates
+    scale, tile = tiles
     h, w = z.shape
-    sd = math.sqrt(inv_var)
-    fsd = fx * sd
+    fsd0 = fx * math.sqrt(inv_var)
+    tcol = np.empty(w, dtype=np.int64)
+    for u in range(w):
+        tcol[u] = u // tile
     pz = np.empty(9)
     ka = np.empty(9)
     kb = np.empty(9)
@@ -416,13 +423,16 @@ def _choose_local_rows(v0, v1, z, score, plane, big_n, big_score, shift, gate, b
             out[v, u, 0] = big_n[0, v, u] if ok else nan
             out[v, u, 1] = big_n[1, v, u] if ok else nan
             out[v, u, 2] = big_n[2, v, u] if ok else nan
+        trow = scale[v // tile]
         for u in range(w):
             zq = z[v, u]
-            if not (zq == zq) or np.float64(big_score[v, u]) <= big_gate:
+            f = trow[tcol[u]]
+            if not (zq == zq) or np.float64(big_score[v, u]) <= big_gate0 * f:
                 continue
             bv = v
             bu = u
-            if not (np.float64(score[v, u]) <= gate):
+            if not (np.float64(score[v, u]) <= gate0 * f):
+                fsd = fsd0 / math.sqrt(f)
                 m = 0  # the valid pixels of the 3x3: depth and position
                 for dv in range(-1, 2):
                     a = v + dv
@@ -511,8 +521,13 @@ def choose_windows(z: np.ndarray, fit_n: np.ndarray, score: np.ndarray, fx: floa
 def box_fit_from_prepared(z: np.ndarray, fx: float, fy: float, cx: float, cy: float, *,
                           radius: int, shift: int, gate: float, self_weight: float,
                           big_radius: int = 0, big_gate: float | None = None,
-                          sigma: float | None = None) -> np.ndarray:
-    """:func:`box_fit_normals` on prepared depth."""
+                          sigma: float | None = None,
+                          sigma_tiles: tuple[np.ndarray, int] | None = None) -> np.ndarray:
+    """:func:`box_fit_normals` on prepared depth. ``sigma_tiles`` ``(levels, tile)``: the noise
+    of every ``tile x tile`` tile (footprints, NaN: ``sigma``;
+    :func:`depthnormals.ddm.noise.noise_tiles`), with ``sigma`` given: ``gate``, ``big_gate``
+    and the local choice's noise unit then scale per pixel with the tile's variance over
+    ``sigma^2``."""
     out = np.empty((z.shape[0], z.shape[1], 3), dtype=np.float32)
     if sigma is not None and sigma > 0.0:  # the local choice (needs the planes)
         _, score, plane = box_fit_windows(z, fx, fy, cx, cy, radius, planes=True, normals=False)
@@ -522,8 +537,14 @@ def box_fit_from_prepared(z: np.ndarray, fx: float, fy: float, cx: float, cy: fl
             big_n = np.empty((3, z.shape[0], z.shape[1]), dtype=np.float32)
             big_s = np.full_like(score, np.inf)
         bg = gate if big_gate is None else big_gate
+        if sigma_tiles is None:
+            tiles = (np.ones((1, 1)), max(z.shape) + 1)
+        else:
+            t, size = sigma_tiles
+            tiles = (np.where(np.isfinite(t), (np.asarray(t, dtype=np.float64) / sigma) ** 2, 1.0),
+                     int(size))
         run_rows(_choose_local_rows, z.shape[0], z, score, plane, big_n, big_s, int(shift),
-                 float(gate), float(bg), 1.0 / (sigma * sigma), LOCAL_CAP,
+                 (float(gate), float(bg), 1.0 / (sigma * sigma)), tiles, LOCAL_CAP,
                  (float(fx), float(fy), float(cx), float(cy)), out, min_rows=16)
         return out
     fit_n, score = box_fit_windows(z, fx, fy, cx, cy, radius)
