@@ -202,6 +202,16 @@ def _wall_details(b: _AssetBuilder, w, d, h) -> None:
     _curtain(b, wy + 1.25, wy + 1.7, d, 0.3, min(h - 0.1, 2.5), folds=8)
 
 
+def _fence(b: _Builder, x0, x1, y, h, *, gap: float = 0.06) -> None:
+    """A picket fence along y = ``y``: two rails and 4 cm slats ``gap`` apart."""
+    b.add(box((x0, y - 0.04, h * 0.25), (x1, y - 0.02, h * 0.33)), solid=False)
+    b.add(box((x0, y - 0.04, h * 0.7), (x1, y - 0.02, h * 0.78)), solid=False)
+    x = x0
+    while x < x1 - 0.04:
+        b.add(box((x, y - 0.02, 0.0), (x + 0.04, y, h)), solid=False)
+        x += 0.04 + gap
+
+
 def _indoor_view(w, d):
     return ([[0.4, 0.4, EYE_Z[0]], [w - 0.4, d - 0.4, EYE_Z[1]]],
             [[0.0, 0.0, TARGET_Z[0]], [w, d, TARGET_Z[1]]])
@@ -245,7 +255,10 @@ def robot_lab(b: _AssetBuilder) -> Scene:
         _clutter(b, x - 0.1, 0.7, x + 0.7, 1.3, 0.8, 8)
         b.put("tray", x + 0.35, 1.0, 0.8)
     _table(b, w / 2, d - 1.2, 2.0, 0.8, 0.9)
-    _clutter(b, w / 2 - 0.9, d - 1.5, w / 2 + 0.9, d - 0.9, 0.9, 10)
+    _clutter(b, w / 2 - 0.9, d - 1.5, w / 2 + 0.9, d - 0.9, 0.9, 16)
+    _shelf_with_clutter(b, w / 2 - 1.8, d - 0.25, 1.2, 0.35, 1.8, 0.0)
+    _chair(b, w / 2 - 0.5, d - 1.85, b.u(-30, 30))
+    _chair(b, w / 2 + 0.5, d - 1.85, b.u(-30, 30))
     b.put("husky", w / 2 + b.u(-0.8, 0.8), d / 2, solid=True)
     b.put("kiva_pod", w - 0.6, d - 0.6, angle=b.u(-10, 10), solid=True)
     _shelf_with_clutter(b, 0.25, d / 2 + 0.5, 1.6, 0.4, 2.0, 90.0)
@@ -255,7 +268,7 @@ def robot_lab(b: _AssetBuilder) -> Scene:
 
 
 def warehouse(b: _AssetBuilder) -> Scene:
-    w, d, h = b.u(10.0, 13.0), b.u(8.0, 10.0), 4.5
+    w, d, h = b.u(8.0, 10.0), b.u(7.0, 8.5), 4.0
     _room(b, w, d, h)
     _wall_details(b, w, d, h)
     for i in range(int((w - 3) / 1.3)):
@@ -265,14 +278,17 @@ def warehouse(b: _AssetBuilder) -> Scene:
                       solid=True)
     for _ in range(3):
         b.put("husky", b.u(1.5, w - 1.5), d / 2 + b.u(-0.8, 0.8), solid=True)
-    for _ in range(6):  # stacked cartons
-        x, y, zz = b.u(1.0, w - 1.0), b.u(0.4, 1.0), 0.0
+    for _ in range(14):  # stacked cartons along the front wall and in the aisle
+        front = b.rng.uniform() < 0.5
+        x, y, zz = b.u(1.0, w - 1.0), b.u(0.4, 1.0) if front else b.u(d / 2 - 1.0, d / 2 + 1.0), 0.0
         for _ in range(int(b.rng.integers(1, 4))):
             s = b.u(0.3, 0.5)
             b.add(box((x - s / 2, y - s / 2, zz), (x + s / 2, y + s / 2, zz + s)))
             zz += s
     for _ in range(5):
         b.put("traffic_cone", b.u(1.0, w - 1.0), d / 2 + b.u(-1.5, 1.5), height=b.u(0.3, 0.5))
+    _floor_clutter(b, 1.0, d / 2 - 1.5, w - 1.0, d / 2 + 1.5, 12)
+    _shelf_with_clutter(b, 0.25, d / 2, 2.4, 0.45, 2.2, 90.0)
     return b.scene("warehouse", "indoor", *_indoor_view(w, d))
 
 
@@ -285,13 +301,14 @@ def kids_room(b: _AssetBuilder) -> Scene:
     _clutter(b, w / 2 - 0.4, d / 2 - 0.25, w / 2 + 0.4, d / 2 + 0.25, 0.5, 8,
              names=("lego", "domino", "toy_cylinder", "toy_prism", "torus"))
     toys = ("shape_sorter", "lego", "domino", "toy_cylinder", "toy_prism", "soccerball", "teddy", "torus")
-    for _ in range(30):  # toys on the floor, at play-box sizes (resized to 8-30 cm)
+    for _ in range(40):  # toys on the floor, at play-box sizes (resized to 8-30 cm)
         b.put(b.pick(toys), b.u(0.3, w - 0.3), b.u(0.3, d - 1.1), height=b.u(0.08, 0.3))
     _plant(b, 0.4, 0.4, b.u(0.6, 1.0))
     _shelf_with_clutter(b, w - 0.2, d / 2, 1.2, 0.3, 1.2, 90.0)
     b.add(box((0.1, d - 1.0, 0.0), (1.9, d - 0.1, 0.45)))  # bed
     b.put("teddy", 0.6, d - 0.6, 0.45, height=0.35)
     _cabinet(b, w / 2, 0.3, 0.8, 0.4, 0.7, 0.0)
+    _shelf_with_clutter(b, 0.2, d / 2 - 0.5, 1.0, 0.3, 1.4, -90.0)
     return b.scene("kids_room", "indoor", *_indoor_view(w, d))
 
 
@@ -388,6 +405,9 @@ def street_assets(b: _AssetBuilder) -> Scene:
         side = yl - b.u(0.6, 2.2) if b.rng.uniform() < 0.5 else yr + b.u(0.6, 2.2)
         _shrub(b, b.u(0, length), side, b.u(0.3, 0.6))
     _bollards(b, 2.0, 12.0, yl - 0.35, 1.5)
+    _fence(b, 14.0, 26.0, yl - 2.4, 1.0)
+    for _ in range(6):
+        _shrub(b, b.u(0, length), yr + b.u(1.5, 2.3), b.u(0.4, 0.7))
     return b.scene("street_assets", "outdoor", *_street_view(length, yl, yr))
 
 
@@ -408,6 +428,7 @@ def sidewalk(b: _AssetBuilder) -> Scene:
     for _ in range(4):
         b.put("stone", b.u(1, length - 1), yl - b.u(0.5, 2.0), height=b.u(0.1, 0.4))
     b.put("racecar", b.u(2, length - 2), yr + 1.2, 0.15)
+    _fence(b, 0.0, length, yr + 2.45, 1.1)
     _car(b, b.u(3, length - 3), yl + 1.2, 0.0)
     for k in range(3):
         _pole(b, (k + 0.5) * length / 3, yr + 0.5, 4.5)
