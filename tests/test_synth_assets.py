@@ -14,9 +14,8 @@ from depthnormals.render import render_mesh
 from depthnormals.synth import generate
 from depthnormals.synth.asset_scenes import ASSET_INDOOR, ASSET_OUTDOOR
 from depthnormals.synth.assets import ASSETS, asset_root, load_asset
+from depthnormals.synth.catalog import make_scene, recipe_of_folder, scene_names
 from depthnormals.synth.poses import sample_poses
-from depthnormals.synth.scenes import make_scene, scene_names
-from depthnormals.synth.writer import recipe_of_folder
 
 SMALL_K, SMALL = (36.5, 36.5, 31.5, 26.0), (53, 64)  # the Kinect v2 field of view at 1/8 size
 LICENCES = {"zlib", "BSD-2-Clause", "Apache-2.0"}

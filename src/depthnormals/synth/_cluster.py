@@ -20,8 +20,9 @@ from typing import Any
 import numpy as np
 
 from ..camera import Intrinsics
+from .catalog import make_scene, recipe_of_folder
 from .poses import PoseConstraints
-from .scenes import Scene, load_mesh_scene, make_scene
+from .scenes import Scene, load_mesh_scene
 
 __all__ = ["generate_on_cluster"]
 
@@ -63,8 +64,6 @@ def _scene_seed(t: _SceneTask) -> int | None:
 @functools.lru_cache(maxsize=4)
 def _scene(kind: str, folder: str, seed: int | None, mesh: str | None) -> Scene:
     """The scene (cached per worker process: consecutive views share it)."""
-    from .writer import recipe_of_folder
-
     if kind == "mesh":
         return load_mesh_scene(mesh)
     return make_scene(recipe_of_folder(folder), seed=seed)

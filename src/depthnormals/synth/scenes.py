@@ -26,7 +26,7 @@ import numpy as np
 
 from .meshes import Mesh, box, cone, cylinder, icosphere, merge, transform
 
-__all__ = ["SCENE_SETS", "Scene", "load_mesh_scene", "make_scene", "scene_names"]
+__all__ = ["Scene", "load_mesh_scene", "make_scene", "scene_names"]
 
 
 @dataclass
@@ -441,31 +441,15 @@ _OUTDOOR: dict[str, Callable[[_Builder], Scene]] = {
                             courtyard, suburb, playground)}
 
 
-#: Scene sets of :func:`scene_names`: the procedural recipes, the asset-mesh recipes
-#: (:mod:`depthnormals.synth.asset_scenes`), or both (procedural first).
-SCENE_SETS = ("procedural", "assets", "all")
-
-
-def scene_names(kind: str | None = None, *, scenes: str = "procedural") -> tuple[str, ...]:
-    """Names of the recipes: ``kind`` ``"indoor"``, ``"outdoor"`` or None (all).
-
-    ``scenes`` picks the set: ``"procedural"`` (default, the 10 + 10 procedural recipes),
-    ``"assets"`` (the asset-mesh recipes, which need ``pip install 'depthnormals[assets]'``
-    to build) or ``"all"`` (procedural first, then assets).
-    """
-    if scenes not in SCENE_SETS:
-        raise ValueError(f"scenes must be one of {', '.join(SCENE_SETS)}; got {scenes!r}")
-    if kind not in (None, "indoor", "outdoor"):
-        raise ValueError(f"kind must be 'indoor', 'outdoor' or None; got {kind!r}")
-    from .asset_scenes import ASSET_INDOOR, ASSET_OUTDOOR
-
-    out: tuple[str, ...] = ()
-    for k, proc, assets in (("indoor", _INDOOR, ASSET_INDOOR), ("outdoor", _OUTDOOR, ASSET_OUTDOOR)):
-        if kind in (None, k):
-            out += (tuple(proc) if scenes != "assets" else ()) + (assets if scenes != "procedural" else ())
-    if kind is None and scenes == "all":  # procedural first, as documented
-        out = tuple(_INDOOR) + tuple(_OUTDOOR) + ASSET_INDOOR + ASSET_OUTDOOR
-    return out
+def scene_names(kind: str | None = None) -> tuple[str, ...]:
+    """Names of the procedural recipes: ``kind`` ``"indoor"``, ``"outdoor"`` or None (all)."""
+    if kind is None:
+        return tuple(_INDOOR) + tuple(_OUTDOOR)
+    if kind == "indoor":
+        return tuple(_INDOOR)
+    if kind == "outdoor":
+        return tuple(_OUTDOOR)
+    raise ValueError(f"kind must be 'indoor', 'outdoor' or None; got {kind!r}")
 
 
 def make_scene(name: str, *, seed: int = 0) -> Scene:
@@ -474,8 +458,7 @@ def make_scene(name: str, *, seed: int = 0) -> Scene:
     Parameters
     ----------
     name : str
-        One of :func:`scene_names` (any scene set; the asset recipes need
-        ``pip install 'depthnormals[assets]'``).
+        One of :func:`scene_names`.
     seed : int, keyword-only
         Non-negative seed of the recipe's random choices (sizes, placements).
 
@@ -489,24 +472,12 @@ def make_scene(name: str, *, seed: int = 0) -> Scene:
     >>> bool(np.array_equal(a.vertices, b.vertices))
     True
     """
-    from .asset_scenes import ASSET_INDOOR, ASSET_OUTDOOR, asset_recipe
-
     recipes = {**_INDOOR, **_OUTDOOR}
-    if name not in recipes and name not in ASSET_INDOOR + ASSET_OUTDOOR:
-        valid = ", ".join((*recipes, *ASSET_INDOOR, *ASSET_OUTDOOR))
-        raise ValueError(f"unknown scene recipe {name!r}; valid: {valid}")
+    if name not in recipes:
+        raise ValueError(f"unknown scene recipe {name!r}; valid: {', '.join(recipes)}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer; got {seed!r}")
-    rng = np.random.default_rng(int(seed))
-    if name not in recipes:  # an asset-mesh recipe: meta also lists the assets used
-        scene = asset_recipe(name)(rng)
-        from .assets import ASSETS
-
-        used = [{"name": n, "package": ASSETS[n].package, "path": ASSETS[n].path,
-                 "licence": ASSETS[n].licence} for n in scene.meta["assets"]]
-        scene.meta = {"recipe": name, "seed": int(seed), "scene_set": "assets", "assets": used}
-        return scene
-    scene = recipes[name](_Builder(rng))
+    scene = recipes[name](_Builder(np.random.default_rng(int(seed))))
     scene.meta = {"recipe": name, "seed": int(seed)}
     return scene
 

@@ -30,8 +30,9 @@ from ..camera import as_intrinsics
 from ..io import write_bytes_atomic, write_png
 from ..render import KINECT_V2, KINECT_V2_SIZE
 from . import noise as _noise
+from .catalog import SCENE_SETS, make_scene, recipe_of_folder, scene_names
 from .poses import PoseConstraints
-from .scenes import SCENE_SETS, load_mesh_scene, make_scene, scene_names
+from .scenes import load_mesh_scene
 from .views import _KIND_ID, _scene_poses, _write_json, _write_view
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "SynthSummary", "export_3f2n", "generate"]
@@ -253,11 +254,6 @@ def _scene_set(scenes: str) -> str:
 
         asset_root()  # fail before anything is written when the asset package is missing
     return scenes
-
-
-def recipe_of_folder(folder: str) -> str:
-    """The recipe of a scene folder ``<recipe>-<index>`` (recipe names hold no ``-``)."""
-    return folder.rsplit("-", 1)[0]
 
 
 def export_3f2n(root: str | Path, out: str | Path, *, variant: str = "clean") -> list[Path]:
