@@ -110,3 +110,18 @@ def test_generate_asset_set(tmp_path):
     assert "scenes" not in json.loads((tmp_path / "p" / "dataset.json").read_text())["settings"]
     with pytest.raises(ValueError, match="scenes must be"):
         generate(tmp_path / "x", indoor=1, outdoor=0, views=1, scenes="real", progress=False)
+
+
+def test_cli_scene_set(tmp_path, capsys):
+    from depthnormals.cli import main
+
+    out = tmp_path / "cli"
+    argv = ["synth", str(out), "--scenes", "assets", "--indoor", "0", "--outdoor", "1", "--views", "1",
+            "--width", "64", "--height", "53", "--noise", "none", "--no-progress"]
+    assert main(argv) == 0
+    assert "1 views" in capsys.readouterr().out
+    assert json.loads((out / "dataset.json").read_text())["scenes"] == ["outdoor/street_assets-00"]
+    with pytest.raises(ValueError, match="seed"):
+        make_scene("pantry", seed=-1)
+    with pytest.raises(ValueError, match="unknown scene recipe"):
+        make_scene("pantry2")

@@ -17,6 +17,8 @@ Examples
 
 from __future__ import annotations
 
+import numpy as np
+
 from . import scenes as _procedural
 from .asset_scenes import ASSET_INDOOR, ASSET_OUTDOOR, asset_recipe
 from .scenes import Scene
@@ -78,10 +80,8 @@ def make_scene(name: str, *, seed: int = 0) -> Scene:
         An asset-mesh recipe without pybullet or trimesh installed.
     """
     if name in ASSET_INDOOR + ASSET_OUTDOOR:
-        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise ValueError(f"seed must be a non-negative integer; got {seed!r}")
-        import numpy as np
-
         from .assets import ASSETS
 
         scene = asset_recipe(name)(np.random.default_rng(int(seed)))
