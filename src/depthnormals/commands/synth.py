@@ -39,6 +39,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="render on Dask: local, local:N (N worker processes) or tcp://host:port "
                              "of a running `dask scheduler` (needs the dask extra)")
     parser.add_argument("--batch-size", type=int, default=16, help="views per Dask task (default 16)")
+    parser.add_argument("--scenes", default="procedural", choices=("procedural", "assets", "all"),
+                        help="scene set: procedural recipes (default), recipes built from real asset "
+                             "meshes (needs the assets extra: pip install 'depthnormals[assets]'), or all")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -61,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
                        seed=args.seed, noise=noise, meshes=args.mesh, K=K,
                        size=(args.height, args.width), constraints=constraints,
                        progress=not args.no_progress, scheduler=args.scheduler,
-                       batch_size=args.batch_size)
+                       batch_size=args.batch_size, scenes=args.scenes)
     print(f"{summary.root}: {summary.frames} views ({summary.written} rendered, {summary.skipped} "
           f"already there) in {summary.seconds:.1f} s; clean render {summary.render_ms_per_frame:.1f} "
           "ms per frame")

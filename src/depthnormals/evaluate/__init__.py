@@ -5,7 +5,7 @@ per frame and method), per-group summaries (markdown and JSON), figures and a si
 of its settings; an interrupted run resumes. :func:`plan_evaluation` checks its arguments
 into an :class:`EvaluationPlan` without running anything. The pieces are public too: :class:`Protocol`
 (which pixels count and how), :func:`score_frame`, :func:`discontinuity_mask`,
-:func:`summarize`.
+:func:`summarize`, :func:`discontinuity_share` (how much of a frame lies near an edge).
 
 Matplotlib is imported only when figures are drawn.
 """
@@ -24,6 +24,7 @@ from ._protocol import (
     scoring_mask,
 )
 from ._run import EvaluationPlan, EvaluationResult, plan_evaluation, run_evaluation
+from ._share import SceneShare, discontinuity_share, synth_discontinuity_shares
 from ._store import FIELDS, read_results_csv
 from ._summary import (
     ALL_GROUPS,
@@ -44,7 +45,9 @@ __all__ = [
     "FrameScore",
     "MethodSpec",
     "Protocol",
+    "SceneShare",
     "discontinuity_mask",
+    "discontinuity_share",
     "group_levels_key",
     "machine_description",
     "parse_method_spec",
@@ -57,5 +60,6 @@ __all__ = [
     "scoring_mask",
     "summarize",
     "summary_markdown",
+    "synth_discontinuity_shares",
     "threshold_curve",
 ]

@@ -1,4 +1,4 @@
-"""Synthetic benchmark generation: procedural scenes, camera poses, sensor noise, writer.
+"""Synthetic benchmark generation: procedural and asset-mesh scenes, camera poses, sensor noise, writer.
 
 Not imported by ``import depthnormals``; trimesh (user meshes) and tqdm (progress bar) are
 imported only when used (``pip install 'depthnormals[synth]'``).
@@ -12,6 +12,7 @@ Examples
 
 from __future__ import annotations
 
+from .catalog import SCENE_SETS, make_scene, scene_names
 from .noise import (
     MODELS,
     gaussian_noise,
@@ -23,13 +24,14 @@ from .noise import (
     tof_noise,
 )
 from .poses import PoseConstraints, check_view, sample_poses
-from .scenes import Scene, load_mesh_scene, make_scene, scene_names
+from .scenes import Scene, load_mesh_scene
 from .writer import FORMAT, FORMAT_VERSION, SynthSummary, export_3f2n, generate
 
 __all__ = [
     "FORMAT",
     "FORMAT_VERSION",
     "MODELS",
+    "SCENE_SETS",
     "PoseConstraints",
     "Scene",
     "SynthSummary",

@@ -20,8 +20,9 @@ from typing import Any
 import numpy as np
 
 from ..camera import Intrinsics
+from .catalog import make_scene, recipe_of_folder
 from .poses import PoseConstraints
-from .scenes import Scene, load_mesh_scene, make_scene, scene_names
+from .scenes import Scene, load_mesh_scene
 
 __all__ = ["generate_on_cluster"]
 
@@ -61,18 +62,18 @@ def _scene_seed(t: _SceneTask) -> int | None:
 
 
 @functools.lru_cache(maxsize=4)
-def _scene(kind: str, index: int, seed: int | None, mesh: str | None) -> Scene:
+def _scene(kind: str, folder: str, seed: int | None, mesh: str | None) -> Scene:
     """The scene (cached per worker process: consecutive views share it)."""
     if kind == "mesh":
         return load_mesh_scene(mesh)
-    return make_scene(scene_names(kind)[index % 10], seed=seed)
+    return make_scene(recipe_of_folder(folder), seed=seed)
 
 
 def _poses_task(t: _SceneTask) -> str:
     from .views import _KIND_ID, _scene_poses
 
     seed = _scene_seed(t)
-    scene = _scene(t.kind, t.index, seed, t.mesh)
+    scene = _scene(t.kind, t.folder, seed, t.mesh)
     _scene_poses(t.sdir, scene, t.kind, seed, t.seed, _KIND_ID[t.kind], t.index, t.views, t.cam, t.size,
                  t.near, t.constraints)
     return t.folder
@@ -83,7 +84,7 @@ def _view_task(v: _ViewTask) -> float | None:
 
     t = v.scene
     seed = _scene_seed(t)
-    scene = _scene(t.kind, t.index, seed, t.mesh)
+    scene = _scene(t.kind, t.folder, seed, t.mesh)
     poses = np.asarray(json.loads((t.sdir / "scene.json").read_text())["poses"], dtype=np.float64)
     return _write_view(t.sdir, scene, poses[v.view], v.view, t.models, t.seed, _KIND_ID[t.kind], t.index,
                        t.cam, t.size, t.near)

@@ -30,8 +30,9 @@ from ..camera import as_intrinsics
 from ..io import write_bytes_atomic, write_png
 from ..render import KINECT_V2, KINECT_V2_SIZE
 from . import noise as _noise
+from .catalog import SCENE_SETS, make_scene, recipe_of_folder, scene_names
 from .poses import PoseConstraints
-from .scenes import load_mesh_scene, make_scene, scene_names
+from .scenes import load_mesh_scene
 from .views import _KIND_ID, _scene_poses, _write_json, _write_view
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "SynthSummary", "export_3f2n", "generate"]
@@ -67,7 +68,8 @@ def generate(out: str | Path, *, indoor: int = 10, outdoor: int = 10, views: int
              noise: Sequence[str] = ("kinect_v2",), meshes: Sequence[str | Path] = (),
              K: Any = KINECT_V2, size: tuple[int, int] = KINECT_V2_SIZE, near: float = 0.05,
              constraints: PoseConstraints | None = None, progress: bool = True,
-             scheduler: str | None = None, batch_size: int = 16) -> SynthSummary:
+             scheduler: str | None = None, batch_size: int = 16,
+             scenes: str = "procedural") -> SynthSummary:
     """Render a synthetic benchmark into ``out`` (clean frames plus one variant per noise model).
 
     Scene ``i`` of a kind uses recipe ``i mod 10`` of that kind (:func:`scene_names`) with its
@@ -106,6 +108,11 @@ def generate(out: str | Path, *, indoor: int = 10, outdoor: int = 10, views: int
         tasks of ``batch_size``); the files are byte-identical to a serial run's.
     batch_size : int, keyword-only
         Views per Dask task.
+    scenes : {"procedural", "assets", "all"}, keyword-only
+        Scene set (:func:`scene_names`): the procedural recipes (default; the files are the
+        same bytes as before the option existed), the asset-mesh recipes of
+        :mod:`depthnormals.synth.asset_scenes` (needs ``pip install 'depthnormals[assets]'``),
+        or both; scene ``i`` of a kind uses recipe ``i mod n`` of the set's ``n`` recipes.
 
     Returns
     -------
@@ -151,12 +158,13 @@ def generate(out: str | Path, *, indoor: int = 10, outdoor: int = 10, views: int
         models[name] = settings
     # load user meshes before anything is written: a bad file fails early
     mesh_scenes = [load_mesh_scene(p) for p in meshes]
+    scene_set = _scene_set(scenes)
     if indoor + outdoor + len(mesh_scenes) == 0:
         raise ValueError("nothing to generate: pass indoor > 0, outdoor > 0 or a mesh")
 
     plan: list[tuple[str, int, str]] = []  # (kind, index, folder name)
     for kind, count in (("indoor", indoor), ("outdoor", outdoor)):
-        names = scene_names(kind)
+        names = scene_names(kind, scenes=scene_set)
         plan += [(kind, i, f"{names[i % len(names)]}-{i:02d}") for i in range(count)]
     plan += [("mesh", i, f"{s.name}-{i:02d}") for i, s in enumerate(mesh_scenes)]
 
@@ -169,6 +177,8 @@ def generate(out: str | Path, *, indoor: int = 10, outdoor: int = 10, views: int
         "K": {"fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy},
         "size": [h, w], "near": float(near), "constraints": constraints.as_dict(),
     }
+    if scene_set != "procedural":  # absent for the default: its dataset.json keeps its bytes
+        settings["scenes"] = scene_set
     meta = {"format": FORMAT, "format_version": FORMAT_VERSION, "library_version": __version__,
             "settings": settings, "scenes": [f"{k}/{n}" for k, _, n in plan],
             "variants": ["clean", *models]}
@@ -216,7 +226,7 @@ def generate(out: str | Path, *, indoor: int = 10, outdoor: int = 10, views: int
                 scene_seed = None
             else:
                 scene_seed = int(np.random.SeedSequence([seed, kid, i, 0]).generate_state(1)[0])
-                scene = make_scene(scene_names(kind)[i % 10], seed=scene_seed)
+                scene = make_scene(recipe_of_folder(folder), seed=scene_seed)
             poses = _scene_poses(sdir, scene, kind, scene_seed, seed, kid, i, views, cam, (h, w),
                                  near, constraints)
             for sub in ("normals", "valid", "clean", *models):
@@ -234,6 +244,16 @@ def generate(out: str | Path, *, indoor: int = 10, outdoor: int = 10, views: int
         bar.close()
     return SynthSummary(root, len(plan) * views, written, skipped, time.perf_counter() - t_start,
                         t_render)
+
+
+def _scene_set(scenes: str) -> str:
+    if scenes not in SCENE_SETS:
+        raise ValueError(f"scenes must be one of {', '.join(SCENE_SETS)}; got {scenes!r}")
+    if scenes != "procedural":
+        from .assets import asset_root
+
+        asset_root()  # fail before anything is written when the asset package is missing
+    return scenes
 
 
 def export_3f2n(root: str | Path, out: str | Path, *, variant: str = "clean") -> list[Path]:
