@@ -21,13 +21,16 @@ from .noise import (
     parse_noise_spec,
 )
 from .poses import PoseConstraints, check_view, sample_poses
+from .presets import PRESETS, SSN_NOISE_MODELS, preset
 from .scenes import Scene, load_mesh_scene, make_scene, scene_names
-from .writer import FORMAT, FORMAT_VERSION, SynthSummary, export_3f2n, generate
+from .writer import FORMAT, FORMAT_VERSION, SynthSummary, export_3f2n, generate, scene_plan
 
 __all__ = [
     "FORMAT",
     "FORMAT_VERSION",
     "MODELS",
+    "PRESETS",
+    "SSN_NOISE_MODELS",
     "PoseConstraints",
     "Scene",
     "SynthSummary",
@@ -41,6 +44,8 @@ __all__ = [
     "make_scene",
     "noise_std",
     "parse_noise_spec",
+    "preset",
     "sample_poses",
     "scene_names",
+    "scene_plan",
 ]
