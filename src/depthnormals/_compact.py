@@ -145,7 +145,7 @@ def encode_normals(normals: np.ndarray) -> np.ndarray:
     n = np.asarray(normals)
     if n.shape[-1:] != (3,) or n.dtype.kind != "f":
         raise ValueError(f"normals must be a float array of shape (..., 3); got {n.dtype} {n.shape}")
-    flat = np.ascontiguousarray(n.reshape(-1, 3))
+    flat = np.ascontiguousarray(n.reshape(-1, 3), dtype=np.float64)  # one compiled signature
     out = np.empty((flat.shape[0], 2), dtype=np.uint16)
     _oct_encode_kernel(flat, out)
     return out.reshape(*n.shape[:-1], 2)
