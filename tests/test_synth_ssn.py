@@ -240,3 +240,20 @@ def test_compact_on_local_cluster_equals_serial(both, tmp_path):
     s = generate(tmp_path / "d", storage="compact", scheduler="local:2", batch_size=2, **KW)
     assert (s.written, s.skipped) == (6, 0)
     assert _tree(tmp_path / "d") == _tree(both / "compact")
+
+
+def test_compiled_discontinuity_mask_equals_the_reference():
+    from depthnormals.synth._kernels import discontinuity_mask as fast
+    from depthnormals.synth.noise import discontinuity_mask as reference
+
+    rng = np.random.default_rng(2)
+    for _ in range(40):
+        z = 2.0 + 0.01 * np.arange(17)[None, :] + rng.normal(0.0, 0.004, (13, 17))  # a smooth slope
+        z[4:9, 6:12] *= rng.uniform(1.01, 1.5)  # a step
+        z[rng.random(z.shape) < 0.03] = 0.0
+        z.flat[rng.integers(0, z.size, 3)] = rng.choice([np.nan, np.inf, -np.inf, -1.0, 1e-300], 3)
+        for jump in (0.02, 0.3):
+            want = reference(z, jump=jump)
+            assert 0 < want.sum() < want.size and np.array_equal(fast(z, jump=jump), want)
+    with pytest.raises(ValueError, match=r"\(H, W\)"):
+        fast(np.zeros(5))

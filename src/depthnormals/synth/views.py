@@ -15,6 +15,7 @@ import numpy as np
 from ..io import atomic_write, write_bytes_atomic
 from ..render import render_mesh, render_subsamples
 from . import noise as _noise
+from ._kernels import discontinuity_mask
 from .poses import sample_poses
 from .scenes import Scene
 
@@ -134,7 +135,7 @@ def _apply_model(name: str, st: dict, r, scene: Scene, pose, cam, size, near, rn
     if s > 1:
         h, w = size
         sub = render_subsamples(scene.vertices, scene.faces, cam, pose=pose, width=w, height=h,
-                                factor=s, mask=_noise.discontinuity_mask(r.depth), near=near)
+                                factor=s, mask=discontinuity_mask(r.depth), near=near)
     return _noise.kinect_v2_noise(r.depth, r.normals, cam, rng=rng, subsamples=sub,
                                   min_range=st["min_range"], max_range=st["max_range"],
                                   dropout_deg=st["dropout_deg"],
