@@ -2,10 +2,11 @@
 
 Three parts, each printed with the load average of the machine at the time:
 
-1. ``stages``: where the time of one view goes, warm, on the first ``--views`` poses of the
-   sample's scenes: the clean render, the Kinect v2 discontinuity mask, its 3x3 sub-pixel
-   render, the rest of the Kinect v2 model, the Gaussian model, and writing the view
-   (``npy``: 5 float32 ``.npy`` files; ``compact``: encoding + one ``.npz``), medians in ms.
+1. ``stages``: where the time of one view goes, warm, on ``--stage-views`` poses of the
+   first indoor and outdoor recipes: the clean render, the Kinect v2 discontinuity mask
+   (numpy reference and the compiled one the generator uses), its 3x3 sub-pixel render, the
+   rest of the Kinect v2 model, the Gaussian model, and writing the view (``npy``: 5
+   float32 ``.npy`` files; ``compact``: encoding + one ``.npz``), medians in ms.
 2. ``runs``: ``generate`` of the sample (``--indoor`` + ``--outdoor`` scenes x ``--views``
    views, preset settings otherwise) serial and on ``local:2``, storage ``npy`` and
    ``compact``, interleaved over ``--rounds`` rounds, each into a fresh folder (poses
@@ -30,6 +31,7 @@ import numpy as np
 from depthnormals.render import render_mesh, render_subsamples
 from depthnormals.synth import generate, make_scene, preset, scene_names
 from depthnormals.synth import noise as _noise
+from depthnormals.synth._kernels import discontinuity_mask
 from depthnormals.synth.poses import sample_poses
 
 
@@ -58,7 +60,9 @@ def stages(views: int) -> None:
                 c = [time.perf_counter()]
                 r = render_mesh(scene.vertices, scene.faces, cam, pose=pose, width=w, height=h)
                 c.append(time.perf_counter())
-                mask = _noise.discontinuity_mask(r.depth)
+                _noise.discontinuity_mask(r.depth)
+                c.append(time.perf_counter())
+                mask = discontinuity_mask(r.depth)
                 c.append(time.perf_counter())
                 sub = render_subsamples(scene.vertices, scene.faces, cam, pose=pose, width=w, height=h,
                                         factor=3, mask=mask)
@@ -79,13 +83,14 @@ def stages(views: int) -> None:
                 c.append(time.perf_counter())
                 write_bytes_atomic(Path(tmp) / "v.npz", data)
                 c.append(time.perf_counter())
-                names = ("render", "kinect_v2 mask", "kinect_v2 sub-pixel render", "kinect_v2 rest",
+                names = ("render", "kinect_v2 mask (numpy reference)", "kinect_v2 mask (compiled)",
+                         "kinect_v2 sub-pixel render", "kinect_v2 rest",
                          "gaussian", "write npy (5 files)", "encode compact", "write compact (1 file)")
                 for name, a, b in zip(names, c[:-1], c[1:], strict=True):
                     t.setdefault(name, []).append(b - a)
     print(f"stages, median ms per view over {2 * views} views ({_load()}):")
     for name, v in t.items():
-        print(f"  {name:28s} {_ms(v):7.1f}")
+        print(f"  {name:34s} {_ms(v):7.1f}")
 
 
 def _du(root: Path) -> int:
