@@ -53,10 +53,10 @@ import numpy as np
 
 from .io import write_bytes_atomic
 
-__all__ = ["decode_normals", "encode_normals", "read_view", "view_bytes"]
+__all__ = ["decode_normals", "encode_normals", "read_view", "view_bytes", "write_view"]
 
-#: deflate level: 1 measured 0.77 MB per view (2 noise models, 512 x 424) against 0.71 MB at
-#: level 6, at a third of the compression time (docs/synthetic.md, "SSN preset").
+#: deflate level: 1 measured 0.77 MB per view (2 noise models, 512 x 424), level 6 about 0.71 MB
+#: at 2-3 times the compression time (docs/synthetic.md, "SSN-scale preset").
 ZLIB_LEVEL = 1
 #: the zip timestamp of every member (the earliest zip can store): files depend on data only.
 _EPOCH = (1980, 1, 1, 0, 0, 0)
