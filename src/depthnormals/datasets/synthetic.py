@@ -1,6 +1,7 @@
 """Reader of datasets written by :func:`depthnormals.synth.generate` (format "depthnormals-synth").
 
-See docs/synthetic.md for the layout.
+See docs/synthetic.md for the layout; both format versions are read (1: ``.npy`` files,
+2: compact ``views/*.npz``, :mod:`depthnormals._compact`).
 """
 
 from __future__ import annotations
@@ -17,6 +18,28 @@ from ._frame import Frame
 __all__ = ["is_synthetic", "read_synthetic"]
 
 _FORMAT = "depthnormals-synth"
+#: 1: one float32 ``.npy`` per array and view; 2: one compact ``views/0000.npz`` per view.
+_VERSIONS = (1, 2)
+
+
+def _load_view(sdir: Path, name: str, variants: Sequence[str],
+               version: int) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]] | None:
+    """(normals, valid, {variant: depth}) of view ``name``, or None if it is not written yet.
+
+    Variants whose file is missing (version 1, interrupted run) are left out.
+    """
+    if version == 2:
+        vfile = sdir / "views" / f"{name}.npz"
+        if not vfile.is_file():
+            return None
+        from .._compact import read_view
+
+        return read_view(vfile, variants)
+    nfile = sdir / "normals" / f"{name}.npy"
+    if not nfile.is_file():
+        return None
+    depths = {v: np.load(sdir / v / f"{name}.npy") for v in variants if (sdir / v / f"{name}.npy").is_file()}
+    return np.load(nfile), np.load(sdir / "valid" / f"{name}.npy"), depths
 
 
 def _sidecar(path: Path) -> dict | None:
@@ -83,6 +106,10 @@ def read_synthetic(path: str | Path, *, variants: Sequence[str] | None = None) -
         if v not in known:
             raise ValueError(f"variant {v!r} not in {p}; valid: {', '.join(known)}")
     noise = {n["model"]: n["settings"] for n in meta["settings"].get("noise", [])}
+    version = meta.get("format_version", 1)
+    if version not in _VERSIONS:
+        raise ValueError(f"{root}: {_FORMAT} format version {version!r}; this depthnormals reads versions "
+                         f"{', '.join(map(str, _VERSIONS))} (a newer depthnormals wrote it?)")
     for rel in scenes:
         sdir = root / rel
         info = json.loads((sdir / "scene.json").read_text())
@@ -91,16 +118,12 @@ def read_synthetic(path: str | Path, *, variants: Sequence[str] | None = None) -
         poses = np.asarray(info["poses"], dtype=np.float64)
         for view in range(poses.shape[0]):
             name = f"{view:04d}"
-            nfile = sdir / "normals" / f"{name}.npy"
-            if not nfile.is_file():
+            loaded = _load_view(sdir, name, chosen, version)
+            if loaded is None:
                 continue  # not generated yet (interrupted run)
-            normals = np.load(nfile)
-            mask = np.load(sdir / "valid" / f"{name}.npy")
-            for v in chosen:
-                dfile = sdir / v / f"{name}.npy"
-                if not dfile.is_file():
-                    continue
-                yield Frame(depth=np.load(dfile), normals=normals, K=K, mask=mask, name=name,
+            normals, mask, depths = loaded
+            for v, depth in depths.items():
+                yield Frame(depth=depth, normals=normals, K=K, mask=mask, name=name,
                             group=f"{rel}/{v}",
                             meta={"format": _FORMAT, "variant": v, "pose": poses[view],
                                   "noise": noise.get(v), "scene": info.get("recipe", info["name"])})

@@ -24,14 +24,17 @@ from .noise import (
     tof_noise,
 )
 from .poses import PoseConstraints, check_view, sample_poses
+from .presets import PRESETS, SSN_NOISE_MODELS, preset
 from .scenes import Scene, load_mesh_scene
-from .writer import FORMAT, FORMAT_VERSION, SynthSummary, export_3f2n, generate
+from .writer import FORMAT, FORMAT_VERSION, SynthSummary, export_3f2n, generate, scene_plan
 
 __all__ = [
     "FORMAT",
     "FORMAT_VERSION",
     "MODELS",
+    "PRESETS",
     "SCENE_SETS",
+    "SSN_NOISE_MODELS",
     "PoseConstraints",
     "Scene",
     "SynthSummary",
@@ -45,8 +48,10 @@ __all__ = [
     "make_scene",
     "noise_std",
     "parse_noise_spec",
+    "preset",
     "realsense_d4xx_noise",
     "sample_poses",
     "scene_names",
+    "scene_plan",
     "tof_noise",
 ]

@@ -41,6 +41,7 @@ class _SceneTask:
     size: tuple[int, int]
     near: float
     constraints: PoseConstraints
+    storage: str = "npy"
 
     @property
     def sdir(self) -> Path:
@@ -87,26 +88,26 @@ def _view_task(v: _ViewTask) -> float | None:
     scene = _scene(t.kind, t.folder, seed, t.mesh)
     poses = np.asarray(json.loads((t.sdir / "scene.json").read_text())["poses"], dtype=np.float64)
     return _write_view(t.sdir, scene, poses[v.view], v.view, t.models, t.seed, _KIND_ID[t.kind], t.index,
-                       t.cam, t.size, t.near)
+                       t.cam, t.size, t.near, t.storage)
 
 
 def generate_on_cluster(scheduler: str, root: Path, plan: list[tuple[str, int, str]], meshes: list[str],
                         views: int, seed: int, models: dict, cam: Intrinsics, size: tuple[int, int],
                         near: float, constraints: PoseConstraints, *, progress: bool,
-                        batch_size: int) -> tuple[int, int, float]:
+                        batch_size: int, storage: str = "npy") -> tuple[int, int, float]:
     """Render ``plan`` into ``root`` on ``scheduler``; returns (written, skipped, render seconds)."""
     from .._progress import Progress
     from ..cluster import connect, map_batches
-    from .views import _view_files
+    from .views import _prepare_scene_dir, _view_files
 
     root = Path(root).absolute()
     tasks = [_SceneTask(str(root), kind, i, folder, meshes[i] if kind == "mesh" else None, seed, views,
-                        models, cam, tuple(size), float(near), constraints) for kind, i, folder in plan]
+                        models, cam, tuple(size), float(near), constraints, storage)
+             for kind, i, folder in plan]
     for t in tasks:
-        for sub in ("normals", "valid", "clean", *models):
-            (t.sdir / sub).mkdir(parents=True, exist_ok=True)
+        _prepare_scene_dir(t.sdir, models, storage)
     todo = [_ViewTask(t, v) for t in tasks for v in range(views)
-            if not all(p.is_file() for p in _view_files(t.sdir, v, models))]
+            if not all(p.is_file() for p in _view_files(t.sdir, v, models, storage))]
     skipped = len(tasks) * views - len(todo)
     seconds: list[float] = []
     bar = Progress("synth", total=len(todo), unit="view", enabled=progress)

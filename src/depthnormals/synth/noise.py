@@ -60,6 +60,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import numpy as np
@@ -134,12 +135,17 @@ def parse_noise_spec(spec: str) -> tuple[str, dict[str, Any]]:
     return name, settings
 
 
+@functools.lru_cache(maxsize=4)
 def _rays(shape: tuple[int, int], cam: Intrinsics) -> np.ndarray:
+    """Unit viewing rays (H, W, 3), read-only; cached: every view of a dataset has the same
+    camera (recomputing them cost 12-19 ms of a 512 x 424 view's Kinect v2 noise)."""
     h, w = shape
     u = (np.arange(w) - cam.cx) / cam.fx
     v = (np.arange(h) - cam.cy) / cam.fy
     r = np.stack(np.broadcast_arrays(u[None, :], v[:, None], np.ones((h, w))), axis=-1)
-    return r / np.linalg.norm(r, axis=-1, keepdims=True)
+    r = r / np.linalg.norm(r, axis=-1, keepdims=True)
+    r.flags.writeable = False
+    return r
 
 
 def incidence_angle(normals: np.ndarray, K: Any) -> np.ndarray:

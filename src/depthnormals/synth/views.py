@@ -15,6 +15,7 @@ import numpy as np
 from ..io import atomic_write, write_bytes_atomic
 from ..render import render_mesh, render_subsamples
 from . import noise as _noise
+from ._kernels import discontinuity_mask
 from .poses import sample_poses
 from .scenes import Scene
 
@@ -36,13 +37,15 @@ def _write_json(path: Path, data: dict) -> None:
 
 
 def _write_view(sdir: Path, scene: Scene, pose: np.ndarray, view: int, models: dict, seed: int, kid: int,
-                i: int, cam, size: tuple[int, int], near: float) -> float | None:
+                i: int, cam, size: tuple[int, int], near: float, storage: str = "npy") -> float | None:
     """Render view ``view`` of a scene and write its files (atomically); None if all exist.
 
     Returns the seconds of the clean render. The unit of work of :func:`generate`, serial
     or on a Dask worker (``depthnormals.synth._cluster``): the same bytes either way.
+    ``storage`` is ``"npy"`` (format version 1, one float32 ``.npy`` per array) or
+    ``"compact"`` (version 2, one ``views/0000.npz`` per view, :mod:`depthnormals._compact`).
     """
-    done = _view_files(sdir, view, models)
+    done = _view_files(sdir, view, models, storage)
     if all(p.is_file() for p in done):
         return None
     h, w = size
@@ -51,20 +54,53 @@ def _write_view(sdir: Path, scene: Scene, pose: np.ndarray, view: int, models: d
     seconds = time.perf_counter() - t0
     if not np.any(r.face >= 0):
         raise ValueError(f"{sdir.parent.name}/{sdir.name} view {view}: the camera sees nothing")
+    noisy = {}
+    for name, st in models.items():
+        rng = _rng(seed, kid, i, 2 + _noise.MODELS.index(name), view)
+        noisy[name] = _apply_model(name, st, r, scene, pose, cam, size, near, rng)
+    if storage == "compact":
+        _write_compact(done[0], r, noisy, models)
+        return seconds
     _save_npy(done[0], r.normals.astype(np.float32))
     _save_npy(done[1], r.face >= 0)
     _save_npy(done[2], r.depth.astype(np.float32))
-    for k, (name, st) in enumerate(models.items()):
-        rng = _rng(seed, kid, i, 2 + _noise.MODELS.index(name), view)
-        noisy = _apply_model(name, st, r, scene, pose, cam, size, near, rng)
-        _save_npy(done[3 + k], noisy.astype(np.float32))
+    for k, name in enumerate(models):
+        _save_npy(done[3 + k], noisy[name].astype(np.float32))
     return seconds
 
 
-def _view_files(sdir: Path, view: int, models: dict) -> list[Path]:
+#: Storage layouts: name -> on-disk format version (docs/synthetic.md).
+STORAGES = {"npy": 1, "compact": 2}
+
+
+def _write_compact(path: Path, r, noisy: dict, models: dict) -> None:
+    """One view as ``views/0000.npz``; depth of a model with a ``rounding`` step stored as integers."""
+    from .._compact import write_view
+
+    steps = {name: st.get("rounding") for name, st in models.items()}
+    write_view(path, r.normals, r.face >= 0, {"clean": r.depth, **noisy}, steps=steps)
+
+
+def _view_files(sdir: Path, view: int, models: dict, storage: str = "npy") -> list[Path]:
+    if storage == "compact":
+        return [sdir / "views" / f"{view:04d}.npz"]
     name = f"{view:04d}.npy"
     return [sdir / "normals" / name, sdir / "valid" / name, sdir / "clean" / name,
             *[sdir / m / name for m in models]]
+
+
+def _prepare_scene_dir(sdir: Path, models: dict, storage: str = "npy") -> None:
+    """Create the scene's view folders; remove temporary files a killed run left behind.
+
+    Atomic writes go through hidden ``.<name>.*.tmp`` files beside the target; a process
+    killed mid-write (SIGKILL, power loss) leaves one, never a partial file under the final
+    name. Two runs into the same folder at once are not supported.
+    """
+    subs = ("views",) if storage == "compact" else ("normals", "valid", "clean", *models)
+    for sub in subs:
+        (sdir / sub).mkdir(parents=True, exist_ok=True)
+        for tmp in (sdir / sub).glob(".*.tmp"):
+            tmp.unlink(missing_ok=True)
 
 
 def _scene_poses(sdir: Path, scene: Scene, kind: str, scene_seed: int | None, seed: int, kid: int,
@@ -105,7 +141,7 @@ def _apply_model(name: str, st: dict, r, scene: Scene, pose, cam, size, near, rn
     if s > 1:
         h, w = size
         sub = render_subsamples(scene.vertices, scene.faces, cam, pose=pose, width=w, height=h,
-                                factor=s, mask=_noise.discontinuity_mask(r.depth), near=near)
+                                factor=s, mask=discontinuity_mask(r.depth), near=near)
     return _noise.kinect_v2_noise(r.depth, r.normals, cam, rng=rng, subsamples=sub,
                                   min_range=st["min_range"], max_range=st["max_range"],
                                   dropout_deg=st["dropout_deg"],
