@@ -8,11 +8,11 @@ from pathlib import Path
 #: Seconds of compilation on a cold numba cache (the rasteriser; see ``commands._firstrun``).
 FIRST_RUN_S = 5
 
-HELP = "render a synthetic benchmark: procedural indoor/outdoor scenes, clean and noisy depth"
+HELP = "render a synthetic benchmark: procedural and asset-mesh indoor/outdoor scenes, clean and noisy depth"
 
 #: Values of the options a preset may set, when neither the preset nor the command line does.
 DEFAULTS = {"indoor": 10, "outdoor": 10, "views": 25, "noise": "kinect_v2", "width": 512, "height": 424,
-            "storage": "npy"}
+            "storage": "npy", "scenes": "procedural"}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -53,9 +53,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="render on Dask: local, local:N (N worker processes) or tcp://host:port "
                              "of a running `dask scheduler` (needs the dask extra)")
     parser.add_argument("--batch-size", type=int, default=16, help="views per Dask task (default 16)")
-    parser.add_argument("--scenes", default="procedural", choices=("procedural", "assets", "all"),
+    parser.add_argument("--scenes", default=None, choices=("procedural", "assets", "all", "mixed"),
                         help="scene set: procedural recipes (default), recipes built from real asset "
-                             "meshes (needs the assets extra: pip install 'depthnormals[assets]'), or all")
+                             "meshes (needs the assets extra: pip install 'depthnormals[assets]'), all "
+                             "(procedural first) or mixed (assets first; the ssn preset's)")
 
 
 def resolve(args: argparse.Namespace) -> dict:
@@ -66,7 +67,7 @@ def resolve(args: argparse.Namespace) -> dict:
         from ..synth.presets import preset
 
         p = preset(args.preset)
-        values.update({k: p[k] for k in ("indoor", "outdoor", "views", "storage")})
+        values.update({k: p[k] for k in ("indoor", "outdoor", "views", "storage", "scenes")})
         values["noise"] = ",".join(p["noise"]) or "none"
         values["height"], values["width"] = p["size"]
     values.update({k: getattr(args, k) for k in DEFAULTS if getattr(args, k) is not None})
@@ -76,7 +77,7 @@ def resolve(args: argparse.Namespace) -> dict:
 def _print_plan(v: dict, noise: list[str]) -> None:
     from ..synth import scene_plan
 
-    plan = scene_plan(v["indoor"], v["outdoor"])
+    plan = scene_plan(v["indoor"], v["outdoor"], scenes=v["scenes"])
     variants = ["clean", *(s.split(":")[0] for s in noise)]
     print(f"plan: {len(plan)} scenes ({v['indoor']} indoor, {v['outdoor']} outdoor) x {v['views']} views = "
           f"{len(plan) * v['views']} views, {v['width']} x {v['height']}; variants {', '.join(variants)} "
@@ -107,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
                        seed=args.seed, noise=noise, meshes=args.mesh, K=K,
                        size=(v["height"], v["width"]), constraints=constraints,
                        progress=not args.no_progress, scheduler=args.scheduler,
-                       batch_size=args.batch_size, storage=v["storage"], scenes=args.scenes)
+                       batch_size=args.batch_size, storage=v["storage"], scenes=v["scenes"])
     print(f"{summary.root}: {summary.frames} views ({summary.written} rendered, {summary.skipped} "
           f"already there) in {summary.seconds:.1f} s; clean render {summary.render_ms_per_frame:.1f} "
           "ms per frame")

@@ -26,7 +26,7 @@ from .scenes import Scene
 __all__ = ["SCENE_SETS", "make_scene", "recipe_of_folder", "scene_names"]
 
 #: Scene sets: the procedural recipes, the asset-mesh recipes, or both (procedural first).
-SCENE_SETS = ("procedural", "assets", "all")
+SCENE_SETS = ("procedural", "assets", "all", "mixed")
 
 
 def scene_names(kind: str | None = None, *, scenes: str = "procedural") -> tuple[str, ...]:
@@ -36,9 +36,11 @@ def scene_names(kind: str | None = None, *, scenes: str = "procedural") -> tuple
     ----------
     kind : {"indoor", "outdoor"} or None
         One kind, or both (indoor first).
-    scenes : {"procedural", "assets", "all"}, keyword-only
+    scenes : {"procedural", "assets", "all", "mixed"}, keyword-only
         ``"procedural"`` (default: the 10 + 10 procedural recipes), ``"assets"`` (the
-        asset-mesh recipes) or ``"all"`` (procedural first, then assets).
+        asset-mesh recipes), ``"all"`` (procedural first, then assets) or ``"mixed"`` (assets
+        first, then procedural: the first 10 scenes of a kind hold every asset recipe and
+        procedural ones after them; the ``ssn`` preset's set).
 
     Returns
     -------
@@ -51,7 +53,10 @@ def scene_names(kind: str | None = None, *, scenes: str = "procedural") -> tuple
     kinds = ("indoor", "outdoor") if kind is None else (kind,)
     assets = {"indoor": ASSET_INDOOR, "outdoor": ASSET_OUTDOOR}
     procedural = sum((_procedural.scene_names(k) for k in kinds), ()) if scenes != "assets" else ()
-    return procedural + (sum((assets[k] for k in kinds), ()) if scenes != "procedural" else ())
+    asset = sum((assets[k] for k in kinds), ()) if scenes != "procedural" else ()
+    if scenes == "mixed":
+        return sum((assets[k] + _procedural.scene_names(k) for k in kinds), ())
+    return procedural + asset
 
 
 def make_scene(name: str, *, seed: int = 0) -> Scene:

@@ -3,7 +3,9 @@
 ``ssn``: the scale of the SSN benchmark of the 3F2N+ paper (Fan et al., "Three-filters-to-normal+",
 2024): 10 indoor + 10 outdoor scenes x 500 views = 10,000 views at the Kinect v2 size
 (512 x 424), clean and one variant per model of :data:`SSN_NOISE_MODELS`, stored compactly
-(format version 2). Options given explicitly override the preset's values.
+(format version 2), from the ``"mixed"`` scene set: every asset-mesh recipe first (7 indoor,
+5 outdoor), then procedural ones (:func:`depthnormals.synth.catalog.scene_names`). Options given
+explicitly override the preset's values.
 
 Examples
 --------
@@ -22,12 +24,12 @@ __all__ = ["PRESETS", "SSN_NOISE_MODELS", "preset"]
 
 #: Noise models of the ``ssn`` preset, one noisy variant each, in this order. The one place to
 #: extend when a model lands in :data:`depthnormals.synth.noise.MODELS`.
-SSN_NOISE_MODELS: tuple[str, ...] = ("kinect_v2", "gaussian")
+SSN_NOISE_MODELS: tuple[str, ...] = ("kinect_v2", "gaussian", "realsense_d4xx", "tof")
 
 #: preset name -> keyword arguments of :func:`depthnormals.synth.generate`.
 PRESETS: dict[str, dict[str, Any]] = {
     "ssn": {"indoor": 10, "outdoor": 10, "views": 500, "noise": SSN_NOISE_MODELS, "K": KINECT_V2,
-            "size": KINECT_V2_SIZE, "storage": "compact"},
+            "size": KINECT_V2_SIZE, "storage": "compact", "scenes": "mixed"},
 }
 
 
@@ -42,7 +44,7 @@ def preset(name: str) -> dict[str, Any]:
     Returns
     -------
     dict
-        ``indoor``, ``outdoor``, ``views``, ``noise``, ``K``, ``size``, ``storage``; pass it on
+        ``indoor``, ``outdoor``, ``views``, ``noise``, ``K``, ``size``, ``storage``, ``scenes``; pass it on
         as ``generate(out, **preset("ssn"))``, overriding entries as needed.
     """
     if name not in PRESETS:
