@@ -126,19 +126,23 @@ def synth_discontinuity_shares(root: str | Path, *, variant: str = "clean", max_
     if max_views is not None and (isinstance(max_views, bool) or not isinstance(max_views, int)
                                   or max_views < 1):
         raise ValueError(f"max_views must be an integer >= 1 or None; got {max_views!r}")
+    from ..datasets.synthetic import read_synthetic  # both storage formats (1: .npy, 2: .npz)
+
+    per_scene: dict[str, list[tuple[int, int]]] = {rel: [] for rel in meta["scenes"]}
+    for f in read_synthetic(root, variants=[variant]):
+        rel = f.group.rsplit("/", 1)[0]
+        if max_views is not None and len(per_scene[rel]) >= max_views:
+            continue
+        z = f.depth
+        v = np.asarray(f.mask, dtype=bool) & np.isfinite(z) & (z > 0)
+        near = discontinuity_mask(f.normals, z, v, radius=radius, edge_angle=edge_angle,
+                                  depth_jump=depth_jump)
+        per_scene[rel].append((int(near.sum()), int(v.sum())))
     out = []
-    for rel in meta["scenes"]:
-        sdir = root / rel
-        files = sorted((sdir / variant).glob("*.npy"))[:max_views]
-        shares, near_total, valid_total = [], 0, 0
-        for f in files:
-            z = np.load(f)
-            n = np.load(sdir / "normals" / f.name)
-            v = np.load(sdir / "valid" / f.name) & np.isfinite(z) & (z > 0)
-            near = discontinuity_mask(n, z, v, radius=radius, edge_angle=edge_angle, depth_jump=depth_jump)
-            k, m = int(near.sum()), int(v.sum())
-            shares.append(k / m if m else float("nan"))
-            near_total, valid_total = near_total + k, valid_total + m
+    for rel, counts in per_scene.items():
+        shares = [k / m if m else float("nan") for k, m in counts]
+        near_total = sum(k for k, _ in counts)
+        valid_total = sum(m for _, m in counts)
         pooled = near_total / valid_total if valid_total else float("nan")
         out.append(SceneShare(rel, rel.split("/", 1)[0], tuple(shares), pooled))
     return out
