@@ -55,9 +55,10 @@ def _write_view(sdir: Path, scene: Scene, pose: np.ndarray, view: int, models: d
     if not np.any(r.face >= 0):
         raise ValueError(f"{sdir.parent.name}/{sdir.name} view {view}: the camera sees nothing")
     noisy = {}
+    subs: dict[int, np.ndarray | None] = {}  # sub-pixel renders, shared by the models of a view
     for name, st in models.items():
         rng = _rng(seed, kid, i, 2 + _noise.MODELS.index(name), view)
-        noisy[name] = _apply_model(name, st, r, scene, pose, cam, size, near, rng)
+        noisy[name] = _apply_model(name, st, r, scene, pose, cam, size, near, rng, subs)
     if storage == "compact":
         _write_compact(done[0], r, noisy, models)
         return seconds
@@ -124,7 +125,12 @@ def _scene_poses(sdir: Path, scene: Scene, kind: str, scene_seed: int | None, se
     return poses
 
 
-def _apply_model(name: str, st: dict, r, scene: Scene, pose, cam, size, near, rng) -> np.ndarray:
+def _apply_model(name: str, st: dict, r, scene: Scene, pose, cam, size, near, rng,
+                 subs: dict | None = None) -> np.ndarray:
+    """Noisy depth of model ``name`` (settings ``st``) for the render ``r``; ``subs`` caches
+    the sub-pixel renders by factor across the models of one view (they depend only on the
+    view and the factor: kinect_v2 and tof share theirs)."""
+    subs = {} if subs is None else subs
     if name == "gaussian":
         return _noise.gaussian_noise(r.depth, cam, rng=rng, sigma=st["sigma"], sigma_px=st["sigma_px"])
     if name == "kinect_v1":
@@ -132,26 +138,24 @@ def _apply_model(name: str, st: dict, r, scene: Scene, pose, cam, size, near, rn
                                       baseline=st["baseline"], subpixel=st["subpixel"])
     if name == "realsense_d4xx":
         return _noise.realsense_d4xx_noise(r.depth, r.normals, cam, rng=rng, **st)
+    sub = _subsamples(st["supersample"], r, scene, pose, cam, size, near, subs)
     if name == "tof":
-        sub = _subsamples(st["supersample"], r, scene, pose, cam, size, near)
         return _noise.tof_noise(r.depth, r.normals, cam, rng=rng, subsamples=sub,
                                 **{k: v for k, v in st.items() if k != "supersample"})
-    s = st["supersample"]
-    sub = None
-    if s > 1:
-        h, w = size
-        sub = render_subsamples(scene.vertices, scene.faces, cam, pose=pose, width=w, height=h,
-                                factor=s, mask=discontinuity_mask(r.depth), near=near)
     return _noise.kinect_v2_noise(r.depth, r.normals, cam, rng=rng, subsamples=sub,
                                   min_range=st["min_range"], max_range=st["max_range"],
                                   dropout_deg=st["dropout_deg"],
                                   dropout_width_deg=st["dropout_width_deg"], rounding=st["rounding"])
 
 
-def _subsamples(factor: int, r, scene: Scene, pose, cam, size, near) -> np.ndarray | None:
-    """Sub-pixel depth near discontinuities (flying pixels), None for ``factor`` 1."""
+def _subsamples(factor: int, r, scene: Scene, pose, cam, size, near, subs: dict) -> np.ndarray | None:
+    """Sub-pixel depth near discontinuities (flying pixels), None for ``factor`` 1; rendered
+    once per factor and view (``subs``)."""
     if factor <= 1:
         return None
-    h, w = size
-    return render_subsamples(scene.vertices, scene.faces, cam, pose=pose, width=w, height=h,
-                             factor=factor, mask=_noise.discontinuity_mask(r.depth), near=near)
+    if factor not in subs:
+        h, w = size
+        subs[factor] = render_subsamples(scene.vertices, scene.faces, cam, pose=pose, width=w,
+                                         height=h, factor=factor, mask=discontinuity_mask(r.depth),
+                                         near=near)
+    return subs[factor]
