@@ -179,6 +179,10 @@ def predict(model: Any, x: np.ndarray, *, batch: int = 16) -> np.ndarray:
 
 # ---------------------------------------------------------------- report
 
+def _sd(a: np.ndarray) -> float:
+    return float(np.std(a, ddof=1)) if a.size > 1 else float("nan")
+
+
 def summarise(results: dict[str, list[dict]], errors: dict[str, float]) -> str:
     """Markdown table: IoU and F1 (%) per input, mean +- sample std over seeds, and per seed."""
     lines = ["| input | channels | IoU % (mean +- std) | F1 % (mean +- std) | IoU per seed | "
@@ -187,10 +191,9 @@ def summarise(results: dict[str, list[dict]], errors: dict[str, float]) -> str:
     for name, runs in results.items():
         iou = np.array([r["iou"] for r in runs]) * 100
         f1 = np.array([r["f1"] for r in runs]) * 100
-        sd = (lambda a: float(np.std(a, ddof=1)) if a.size > 1 else float("nan"))
         err = f"{errors[name]:.1f}" if name in errors else "-"
-        lines.append(f"| {name} | {runs[0]['channels']} | {iou.mean():.2f} +- {sd(iou):.2f} | "
-                     f"{f1.mean():.2f} +- {sd(f1):.2f} | {' / '.join(f'{v:.2f}' for v in iou)} | {err} |")
+        lines.append(f"| {name} | {runs[0]['channels']} | {iou.mean():.2f} +- {_sd(iou):.2f} | "
+                     f"{f1.mean():.2f} +- {_sd(f1):.2f} | {' / '.join(f'{v:.2f}' for v in iou)} | {err} |")
     return "\n".join(lines)
 
 

@@ -1,4 +1,4 @@
-"""Freespace labels of the road scenes, the segmentation scores and the freespace benchmark's training loop."""
+"""Freespace labels of the road scenes, segmentation scores, the freespace benchmark's training loop."""
 
 from __future__ import annotations
 
@@ -62,7 +62,7 @@ def test_label_is_the_visible_road_top_and_not_the_pavement():
     scene = make_scene("street", seed=0)
     K = road_camera((48, 96))
     eye = np.array([-3.0, 0.0, 1.5])
-    pose = look_at(eye, eye + [1.0, 0.0, -0.08])
+    pose = look_at(eye, eye + np.array([1.0, 0.0, -0.08]))
     r = render_mesh(scene.vertices, scene.faces, K, pose=pose, width=96, height=48)
     label = freespace_label(scene, r, pose)
     parts = np.where(r.face >= 0, scene.parts[np.maximum(r.face, 0)], 255)
