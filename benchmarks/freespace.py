@@ -254,10 +254,10 @@ def parse_size(text: str) -> tuple[int, int]:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--size", type=parse_size, default=(96, 192), help="HxW (default 96x192)")
+    p.add_argument("--size", type=parse_size, default=(64, 128), help="HxW (default 64x128)")
     p.add_argument("--train", type=int, default=160, help="training frames")
     p.add_argument("--test", type=int, default=80, help="held-out frames (other scene instances)")
-    p.add_argument("--epochs", type=int, default=8)
+    p.add_argument("--epochs", type=int, default=14)
     p.add_argument("--seeds", type=int, default=3)
     p.add_argument("--width", type=int, default=8, help="channels of the first U-Net level")
     p.add_argument("--noise", default="gaussian:sigma_px=0.5", help="sensor model spec or 'none'")
