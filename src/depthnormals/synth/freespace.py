@@ -190,10 +190,15 @@ def sample_road_pose(scene: Scene, K: Any, size: tuple[int, int], *, rng: np.ran
         If no pose is accepted in ``max_tries`` draws.
     """
     h, w = _check_size(size)
+    min_free = check_real(min_free, "min_free", minimum=0.0, maximum=1.0)
+    max_tries = check_int(max_tries, "max_tries", minimum=1, maximum=10**6)
+    lo, hi = (check_real(v, "height", minimum=0.1, maximum=100.0) for v in height)
+    if scene.parts is None or not np.any(scene.parts == _GROUND):
+        raise ValueError(f"scene {scene.name!r} has no ground part to drive on; use one of {ROAD_RECIPES}")
     x0, x1, y0, y1 = _drivable_box(scene)
     street = bool(np.any(scene.parts == _KERB))
     for _ in range(max_tries):
-        eye = np.array([rng.uniform(x0, x1), rng.uniform(y0 + 1.0, y1 - 1.0), rng.uniform(*height)])
+        eye = np.array([rng.uniform(x0, x1), rng.uniform(y0 + 1.0, y1 - 1.0), rng.uniform(lo, hi)])
         if street:
             ahead = 0.0 if eye[0] < (x0 + x1) / 2 else 180.0  # towards the farther end of the street
             yaw = np.radians(ahead + rng.normal(0.0, 8.0))
