@@ -319,8 +319,8 @@ def main(argv: list[str] | None = None) -> int:
                 "normal_error_deg": errors, "results": results}
         write_bytes_atomic(args.out.with_suffix(".json"), (json.dumps(meta, indent=1) + "\n").encode())
     if args.figure:
-        order = np.argsort([f.scene for f in test_frames], kind="stable")
-        picks = [int(order[k]) for k in np.linspace(0, len(order) - 1, 4).round().astype(int)]
+        recipes = [f.scene.split("/")[0] for f in test_frames]
+        picks = [recipes.index(r) for r in dict.fromkeys(recipes)]  # the first test frame of each recipe
         figure(args.figure, test_frames, x_test, preds, picks)
         log(f"figure written to {args.figure}")
     return 0
