@@ -26,7 +26,13 @@ import numpy as np
 
 from .meshes import Mesh, box, cone, cylinder, icosphere, merge, transform
 
-__all__ = ["Scene", "load_mesh_scene", "make_scene", "scene_names"]
+__all__ = ["PART_NAMES", "Scene", "load_mesh_scene", "make_scene", "scene_names"]
+
+#: Part labels of :attr:`Scene.parts` (the label is the index). The procedural recipes tag
+#: the ground (whose visible top is the drivable surface in the street and open recipes),
+#: kerbs (raised pavements), buildings, vehicles, vegetation, poles and benches; every other
+#: part (furniture, rooms, fountains, spheres) is "other". Append only: labels are stored.
+PART_NAMES = ("other", "ground", "kerb", "building", "vehicle", "vegetation", "pole", "bench")
 
 
 @dataclass
@@ -49,6 +55,9 @@ class Scene:
         Box where look-at points are drawn.
     meta : dict
         Recipe and seed (or source file).
+    parts : ndarray (M,) uint8 or None
+        Part label of each face, an index into :data:`PART_NAMES` (procedural recipes);
+        None when unknown (user meshes).
     """
 
     name: str
@@ -59,6 +68,7 @@ class Scene:
     eye_box: np.ndarray
     target_box: np.ndarray
     meta: dict = field(default_factory=dict)
+    parts: np.ndarray | None = None
 
 
 class _Builder:
@@ -66,9 +76,11 @@ class _Builder:
         self.rng = rng
         self.parts: list[Mesh] = []
         self.solids: list[np.ndarray] = []
+        self.labels: list[np.ndarray] = []
 
-    def add(self, mesh: Mesh, *, solid: bool = True) -> None:
+    def add(self, mesh: Mesh, *, solid: bool = True, part: str = "other") -> None:
         self.parts.append(mesh)
+        self.labels.append(np.full(mesh[1].shape[0], PART_NAMES.index(part), dtype=np.uint8))
         if solid:
             V = mesh[0]
             self.solids.append(np.stack([V.min(0), V.max(0)]))
@@ -80,7 +92,7 @@ class _Builder:
         V, F = merge(self.parts)
         solids = np.array(self.solids) if self.solids else np.zeros((0, 2, 3))
         return Scene(name, kind, V, F, solids, np.asarray(eye_box, float), np.asarray(target_box, float),
-                     {"recipe": name})
+                     {"recipe": name}, np.concatenate(self.labels))
 
 
 # ---------------------------------------------------------------- furniture and street parts
@@ -144,7 +156,7 @@ def _stairs(b: _Builder, x, y, w, steps, rise, run) -> None:
 
 
 def _building(b: _Builder, x0, y0, x1, y1, h, *, windows=True) -> None:
-    b.add(box((x0, y0, 0.0), (x1, y1, h)))
+    b.add(box((x0, y0, 0.0), (x1, y1, h)), part="building")
     if not windows:
         return
     # window sills and frames protrude 5 cm from the two long facades
@@ -156,7 +168,7 @@ def _building(b: _Builder, x0, y0, x1, y1, h, *, windows=True) -> None:
             for ys, yo in ((y0, -0.05), (y1, 0.05)):
                 lo = (xc - 0.6, min(ys, ys + yo), z)
                 hi = (xc + 0.6, max(ys, ys + yo), z + 0.08)
-                b.add(box(lo, hi), solid=False)
+                b.add(box(lo, hi), solid=False, part="building")
 
 
 def _car(b: _Builder, x, y, angle) -> None:
@@ -165,37 +177,37 @@ def _car(b: _Builder, x, y, angle) -> None:
         for sy in (-0.75, 0.55):
             parts.append(cylinder((sx, sy, 0.33), 0.33, 0.2, axis="y"))
     for p in parts:
-        b.add(transform(p, rotate_z_deg=angle, translate=(x, y, 0.0)))
+        b.add(transform(p, rotate_z_deg=angle, translate=(x, y, 0.0)), part="vehicle")
 
 
 def _tree(b: _Builder, x, y, h) -> None:
-    b.add(cylinder((x, y, 0.0), 0.15, h * 0.6))
+    b.add(cylinder((x, y, 0.0), 0.15, h * 0.6), part="vegetation")
     r = h * 0.3
     if b.rng.uniform() < 0.5:
-        b.add(icosphere((x, y, h * 0.6 + r * 0.6), r))
+        b.add(icosphere((x, y, h * 0.6 + r * 0.6), r), part="vegetation")
     else:
-        b.add(cone((x, y, h * 0.45), r * 1.1, h * 0.7))
+        b.add(cone((x, y, h * 0.45), r * 1.1, h * 0.7), part="vegetation")
 
 
 def _pole(b: _Builder, x, y, h) -> None:
-    b.add(cylinder((x, y, 0.0), 0.06, h))
-    b.add(icosphere((x, y, h + 0.15), 0.2, level=4))
+    b.add(cylinder((x, y, 0.0), 0.06, h), part="pole")
+    b.add(icosphere((x, y, h + 0.15), 0.2, level=4), part="pole")
 
 
 def _bench(b: _Builder, x, y, angle) -> None:
     parts = [box((-0.9, -0.2, 0.42), (0.9, 0.2, 0.47)), box((-0.9, 0.17, 0.47), (0.9, 0.22, 0.85)),
              box((-0.8, -0.2, 0.0), (-0.75, 0.2, 0.42)), box((0.75, -0.2, 0.0), (0.8, 0.2, 0.42))]
     for p in parts:
-        b.add(transform(p, rotate_z_deg=angle, translate=(x, y, 0.0)))
+        b.add(transform(p, rotate_z_deg=angle, translate=(x, y, 0.0)), part="bench")
 
 
 def _ground(b: _Builder, x0, y0, x1, y1) -> None:
-    b.add(box((x0, y0, -0.2), (x1, y1, 0.0)), solid=False)
+    b.add(box((x0, y0, -0.2), (x1, y1, 0.0)), solid=False, part="ground")
 
 
 def _kerbs(b: _Builder, x0, x1, y_left, y_right) -> None:
-    b.add(box((x0, y_left - 2.5, 0.0), (x1, y_left, 0.15)), solid=False)
-    b.add(box((x0, y_right, 0.0), (x1, y_right + 2.5, 0.15)), solid=False)
+    b.add(box((x0, y_left - 2.5, 0.0), (x1, y_left, 0.15)), solid=False, part="kerb")
+    b.add(box((x0, y_right, 0.0), (x1, y_right + 2.5, 0.15)), solid=False, part="kerb")
 
 
 def _indoor_eye(w, d, h=1.8):
@@ -401,7 +413,8 @@ def _open_scene(b: _Builder, name: str, size: float, *, cars=0, trees=0, benches
         cx, cy = 0.9 * size * np.cos(a), 0.9 * size * np.sin(a)
         hx, hy, hz = b.u(4, 7), b.u(4, 7), b.u(3, 6)
         _building(b, cx - hx / 2, cy - hy / 2, cx + hx / 2, cy + hy / 2, hz, windows=False)
-        b.add(cone((cx, cy, hz), max(hx, hy) * 0.72, 2.5, sections=4), solid=False)  # pyramid roof
+        b.add(cone((cx, cy, hz), max(hx, hy) * 0.72, 2.5, sections=4), solid=False,  # pyramid roof
+              part="building")
     eye = [[-r, -r, 1.2], [r, r, 1.8]]
     target = [[-r, -r, 0.0], [r, r, 1.5]]
     return b.scene(name, "outdoor", eye, target)
