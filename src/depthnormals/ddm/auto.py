@@ -35,7 +35,7 @@ import numpy as np
 from .._parallel import run_rows
 from ..kernels.orient import store_normal
 from .boxfit import box_fit_from_prepared
-from .noise import TILE, noise_from_prepared, noise_tiles
+from .noise import TILE, noise_pass, noise_tiles
 
 __all__ = ["AUTO_CONSISTENCY", "BIG_RADIUS", "GATE", "KEEP_CHI2", "MAX_RADIUS", "NOISE_CLEAN",
            "TARGET_STD", "auto_fused", "box_radius", "box_select", "refine_auto"]
@@ -130,7 +130,7 @@ def _keep_rows(v0, v1, z, base, kappa, fx, fy, cx, cy, out):
 
 def box_select(z: np.ndarray, base: np.ndarray | None, fx: float, fy: float, cx: float,
                cy: float, sigma: float, *, keep_chi2: float | None = None,
-               local: bool = True) -> np.ndarray:
+               local: bool = True, levels: np.ndarray | None = None) -> np.ndarray:
     """The box-fit branch on prepared depth ``z``: normals (H, W, 3) float32.
 
     With ``base`` (the estimator's normals): NaN where it has none, and its normal kept
@@ -141,13 +141,15 @@ def box_select(z: np.ndarray, base: np.ndarray | None, fx: float, fy: float, cx:
 
     With ``local`` (default), the plane tests use the noise of the pixel's 64x64 tile
     (:func:`depthnormals.ddm.noise.noise_tiles`, at least :data:`NOISE_CLEAN`) instead of the
-    image's ``sigma``; the window radius follows ``sigma``."""
+    image's ``sigma``; the window radius follows ``sigma``. ``levels``: those tiles' noise when
+    already measured (:func:`depthnormals.ddm.noise.noise_levels`)."""
     r = box_radius(sigma)
     gate = GATE * sigma * sigma if sigma == sigma else 0.0
     noisy = sigma == sigma and sigma > 0.0
     tiles = None
     if noisy and local:
-        tiles = (np.maximum(noise_tiles(z, fx, fy, tile=TILE), NOISE_CLEAN), TILE)
+        t = noise_tiles(z, fx, fy, tile=TILE) if levels is None else levels
+        tiles = (np.maximum(t, NOISE_CLEAN), TILE)
     out = box_fit_from_prepared(z, fx, fy, cx, cy, radius=r, shift=r, gate=gate, self_weight=1.0,
                                 big_radius=max(BIG_RADIUS, r), sigma=sigma if noisy else None,
                                 sigma_tiles=tiles)
@@ -165,9 +167,10 @@ def refine_auto(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
     """``selection="auto"`` / ``"box-fit"`` of the generic module path (any estimator's
     normals ``n_in``); ``curvature_refine(o)`` runs the module's curvature path with options
     ``o`` (the clean branch)."""
-    sigma = noise_from_prepared(z, fx, fy)
+    p = noise_pass(z, fx, fy, tile=TILE)
+    sigma = p.sigma
     if o["selection"] == "box-fit" or sigma >= NOISE_CLEAN:
-        return box_select(z, n_in, fx, fy, cx, cy, sigma)
+        return box_select(z, n_in, fx, fy, cx, cy, sigma, levels=p.tiles())
     out = curvature_refine(_clean_options(o))
     run_rows(_mask_rows, z.shape[0], n_in, out)
     return out
@@ -189,9 +192,10 @@ def auto_fused(fused_plus, depth, K, depth_scale, estimator_options: dict,
     from ..kernels.depth import prepare
 
     z, cam = prepare(depth, K, depth_scale)
-    sigma = noise_from_prepared(z, cam.fx, cam.fy)
+    p = noise_pass(z, cam.fx, cam.fy, tile=TILE)
+    sigma = p.sigma
     if o["selection"] == "box-fit" or sigma >= NOISE_CLEAN:
-        return box_select(z, None, cam.fx, cam.fy, cam.cx, cam.cy, sigma)
+        return box_select(z, None, cam.fx, cam.fy, cam.cx, cam.cy, sigma, levels=p.tiles())
     c = _clean_options(o)
     return fused_plus(depth, K, depth_scale, estimator_options,
                       {**module_options, "selection": "curvature", "consistency": c["consistency"]})

@@ -25,7 +25,8 @@ import numpy as np
 
 from ..kernels.depth import prepare
 
-__all__ = ["TILE", "estimate_noise", "estimate_noise_map", "noise_samples", "noise_tiles"]
+__all__ = ["TILE", "NoiseSamples", "estimate_noise", "estimate_noise_map", "noise_levels", "noise_pass",
+           "noise_samples", "noise_tiles"]
 
 _MAD = 0.6744897501960817  # median of |N(0, 1)|
 _SQRT6 = 6.0 ** 0.5
@@ -78,13 +79,7 @@ def noise_samples(z: np.ndarray, fx: float, fy: float, *, stride: int = STRIDE) 
 
 def noise_from_prepared(z: np.ndarray, fx: float, fy: float) -> float:
     """:func:`estimate_noise` on prepared depth (NaN at invalid pixels); NaN when no triple."""
-    h, w = z.shape
-    out = np.empty((h // STRIDE + 1) * (w + w // STRIDE + 2))
-    m = _samples(z, float(fx), float(fy), STRIDE, out)
-    if m == 0:
-        return float("nan")
-    # numpy's median (the same order statistics as numba's, without its 1.5 s first compile)
-    return float(np.median(out[:m])) / (_MAD * _SQRT6)
+    return noise_pass(z, fx, fy).sigma
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -117,42 +112,91 @@ def _kth(a, n, k):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _tile_levels(z, fx, fy, tile, stride, minimum, out):
-    """Per tile of ``tile x tile`` pixels: the median of the samples ``x sqrt(6)`` (module
-    doc) of every ``stride``-th row (horizontal triples) and column of those rows (vertical
-    triples); NaN with fewer than ``minimum`` samples. Writes ``out`` (tiles down, across)."""
+def _tile_samples(z, fx, fy, tile, stride, every, starts):
+    """The samples ``x sqrt(6)`` (module doc) tile by tile (``tile x tile`` pixels, rows of
+    tiles first): every ``stride``-th row (horizontal triples) and column of those rows
+    (vertical triples). Writes them into ``every``, tile ``t``'s from ``starts[t]`` to
+    ``starts[t + 1]``; returns their number."""
     h, w = z.shape
-    buf = np.empty(2 * tile * tile // stride + 2)
-    for i in range(out.shape[0]):
-        for j in range(out.shape[1]):
-            m = 0
-            u0 = max(j * tile, 1)
-            u1 = min((j + 1) * tile, w - 1)
-            for v in range(max(i * tile + stride // 2, 1), min((i + 1) * tile, h - 1), stride):
-                for u in range(u0, u1):
-                    b = np.float64(z[v, u])
-                    a = np.float64(z[v, u - 1])
-                    c = np.float64(z[v, u + 1])
-                    if a == a and b == b and c == c:
-                        buf[m] = abs(1.0 / a - 2.0 / b + 1.0 / c) * fx * b
-                        m += 1
-                for u in range(max(j * tile + stride // 2, 1), u1, stride):
-                    b = np.float64(z[v, u])
-                    a = np.float64(z[v - 1, u])
-                    c = np.float64(z[v + 1, u])
-                    if a == a and b == b and c == c:
-                        buf[m] = abs(1.0 / a - 2.0 / b + 1.0 / c) * fy * b
-                        m += 1
-            out[i, j] = _kth(buf, m, m // 2) if m >= minimum else np.nan
+    tw = (w + tile - 1) // tile
+    n = 0
+    for t in range(starts.size - 1):
+        i = t // tw
+        j = t - i * tw
+        starts[t] = n
+        u0 = max(j * tile, 1)
+        u1 = min((j + 1) * tile, w - 1)
+        for v in range(max(i * tile + stride // 2, 1), min((i + 1) * tile, h - 1), stride):
+            for u in range(u0, u1):
+                b = np.float64(z[v, u])
+                a = np.float64(z[v, u - 1])
+                c = np.float64(z[v, u + 1])
+                if a == a and b == b and c == c:
+                    every[n] = abs(1.0 / a - 2.0 / b + 1.0 / c) * fx * b
+                    n += 1
+            for u in range(max(j * tile + stride // 2, 1), u1, stride):
+                b = np.float64(z[v, u])
+                a = np.float64(z[v - 1, u])
+                c = np.float64(z[v + 1, u])
+                if a == a and b == b and c == c:
+                    every[n] = abs(1.0 / a - 2.0 / b + 1.0 / c) * fy * b
+                    n += 1
+    starts[starts.size - 1] = n
+    return n
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _tile_medians(every, starts, minimum, out):
+    """Median of each tile's samples (reorders them); NaN below ``minimum`` samples."""
+    for t in range(out.size):
+        a = starts[t]
+        m = starts[t + 1] - a
+        out.flat[t] = _kth(every[a:a + m], m, m // 2) if m >= minimum else np.nan
+
+
+class NoiseSamples:
+    """The samples of one pass over prepared depth (:func:`noise_pass`): the image's level
+    now (``sigma``), every tile's on demand (:meth:`tiles`)."""
+
+    def __init__(self, every: np.ndarray, starts: np.ndarray, shape: tuple[int, int]):
+        self._every = every
+        self._starts = starts
+        self._shape = shape
+        n = every.size
+        # numpy's selection (a copy: the tiles' samples stay in place)
+        self.sigma = float(np.partition(every, n // 2)[n // 2]) / (_MAD * _SQRT6) if n else float("nan")
+
+    def tiles(self) -> np.ndarray:
+        """Every tile's level, footprints (tiles down, across), NaN below :data:`TILE_MIN`."""
+        out = np.empty(self._shape)
+        _tile_medians(self._every, self._starts, TILE_MIN, out)
+        return out / (_MAD * _SQRT6)
+
+
+def noise_pass(z: np.ndarray, fx: float, fy: float, *, tile: int = TILE) -> NoiseSamples:
+    """One pass over prepared depth ``z`` (NaN invalid): rows ``tile k + 6 + 12 j`` and, on
+    them, every 12th column (:data:`TILE_STRIDE`), ~29k triples on 640x480, kept by tile."""
+    h, w = z.shape
+    shape = ((h + tile - 1) // tile, (w + tile - 1) // tile)
+    every = np.empty((h // TILE_STRIDE + shape[0] + 1) * (w + w // TILE_STRIDE + shape[1] + 1))
+    starts = np.empty(shape[0] * shape[1] + 1, dtype=np.int64)
+    n = _tile_samples(z, float(fx), float(fy), int(tile), TILE_STRIDE, every, starts)
+    return NoiseSamples(every[:n], starts, shape)
+
+
+def noise_levels(z: np.ndarray, fx: float, fy: float, *,
+                 tile: int = TILE) -> tuple[float, np.ndarray]:
+    """The image's noise and every tile's (:func:`noise_pass`), footprints: ``(sigma,
+    tiles)``, ``sigma`` the median of all the samples (NaN when there is none), ``tiles``
+    (ceil(H / tile), ceil(W / tile)) float64, NaN where a tile has fewer than
+    :data:`TILE_MIN` triples."""
+    p = noise_pass(z, fx, fy, tile=tile)
+    return p.sigma, p.tiles()
 
 
 def noise_tiles(z: np.ndarray, fx: float, fy: float, *, tile: int = TILE) -> np.ndarray:
-    """Per-tile noise of prepared depth ``z`` (NaN invalid), footprints: (ceil(H / tile),
-    ceil(W / tile)) float64, NaN where a tile has fewer than :data:`TILE_MIN` triples."""
-    h, w = z.shape
-    out = np.empty(((h + tile - 1) // tile, (w + tile - 1) // tile))
-    _tile_levels(z, float(fx), float(fy), int(tile), TILE_STRIDE, TILE_MIN, out)
-    return out / (_MAD * _SQRT6)
+    """Per-tile noise of prepared depth ``z`` (:func:`noise_levels`' tiles)."""
+    return noise_pass(z, fx, fy, tile=tile).tiles()
 
 
 def estimate_noise_map(depth: Any, K: Any, *, tile: int = TILE,
@@ -180,7 +224,8 @@ def estimate_noise_map(depth: Any, K: Any, *, tile: int = TILE,
     sigma : ndarray, shape (H, W), float32
         Every pixel holds its tile's noise (footprints); a tile with fewer than
         :data:`TILE_MIN` valid triples (sampled on every 12th row and column) holds the
-        image's level (:func:`estimate_noise`), NaN if there is none.
+        image's level (the median of all the map's samples: :func:`estimate_noise` for the
+        default tile), NaN if there is none.
 
     Examples
     --------
@@ -197,8 +242,8 @@ def estimate_noise_map(depth: Any, K: Any, *, tile: int = TILE,
     if isinstance(tile, bool) or not isinstance(tile, (int, np.integer)) or tile < 8:
         raise ValueError(f"tile must be an integer >= 8; got {tile!r}")
     z, cam = prepare(depth, K, depth_scale)
-    t = noise_tiles(z, cam.fx, cam.fy, tile=int(tile))
-    t = np.where(np.isfinite(t), t, noise_from_prepared(z, cam.fx, cam.fy))
+    sigma, t = noise_levels(z, cam.fx, cam.fy, tile=int(tile))
+    t = np.where(np.isfinite(t), t, sigma)
     h, w = z.shape
     return np.repeat(np.repeat(t, tile, axis=0), tile, axis=1)[:h, :w].astype(np.float32)
 
@@ -209,7 +254,8 @@ def estimate_noise(depth: Any, K: Any, *, depth_scale: float | None = None) -> f
     The median absolute second difference of inverse depth (zero on every plane), scaled to
     footprints and divided by ``0.6745 sqrt(6)`` (the MAD rule for Gaussian noise); see the
     module doc. Depth jumps and creases, a minority of the pixels, do not move the median.
-    Samples every 12th row (and column, vertically): about 29k triples on 640x480.
+    Samples every 12th row (and column, vertically): about 29k triples on 640x480 (the
+    samples of :func:`estimate_noise_map`, read in the same pass).
 
     Parameters
     ----------
