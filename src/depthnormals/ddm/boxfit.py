@@ -390,7 +390,7 @@ def _choose_rows(v0, v1, z, fit_n, score, big_n, big_score, shift, gate, big_gat
                          np.float64(fit_n[2, bv, bu]), (u - cx) / fx, (v - cy) / fy, 1.0)
 
 
-@nb.njit(**_JIT)
+@nb.njit(**_JIT, fastmath=_FASTMATH)
 def _choose_local_rows(v0, v1, z, score, plane, big_n, big_score, shift, gates, tiles, cap, cam,
                        out):
     """Rows of :func:`choose_windows` with ``plane``: among the nine windows the one whose plane
