@@ -235,7 +235,7 @@ def furnished_living(b: _AssetBuilder) -> Scene:
     _plant(b, 0.5, 1.2, b.u(0.6, 1.1))
     _cabinet(b, 0.3, d / 2, 0.9, 0.45, 0.9, -90.0)
     _clutter(b, 0.15, d / 2 - 0.4, 0.45, d / 2 + 0.4, 0.9, 5)
-    _floor_clutter(b, 0.6, 0.6, w - 0.6, d - 1.5, 16)
+    _floor_clutter(b, 0.6, 0.6, w - 0.6, d - 1.5, 26)
     b.add(box((2.8, d - 0.5, 0.0), (3.4, d - 0.1, 0.6)))  # side cabinet with a lamp
     b.add(cylinder((3.1, d - 0.3, 0.6), 0.02, 0.45), solid=False)
     b.add(cylinder((3.1, d - 0.3, 1.0), 0.15, 0.2, sections=128), solid=False)
@@ -263,7 +263,7 @@ def robot_lab(b: _AssetBuilder) -> Scene:
     b.put("kiva_pod", w - 0.6, d - 0.6, angle=b.u(-10, 10), solid=True)
     _shelf_with_clutter(b, 0.25, d / 2 + 0.5, 1.6, 0.4, 2.0, 90.0)
     _cabinet(b, w - 0.3, d / 2, 1.0, 0.5, 1.1, 90.0)
-    _floor_clutter(b, 0.6, 1.6, w - 0.6, d - 1.8, 10)
+    _floor_clutter(b, 0.6, 1.6, w - 0.6, d - 1.8, 24)
     return b.scene("robot_lab", "indoor", *_indoor_view(w, d))
 
 
@@ -278,7 +278,7 @@ def warehouse(b: _AssetBuilder) -> Scene:
                       solid=True)
     for _ in range(3):
         b.put("husky", b.u(1.5, w - 1.5), d / 2 + b.u(-0.8, 0.8), solid=True)
-    for _ in range(14):  # stacked cartons along the front wall and in the aisle
+    for _ in range(24):  # stacked cartons along the front wall and in the aisle
         front = b.rng.uniform() < 0.5
         x, y, zz = b.u(1.0, w - 1.0), b.u(0.4, 1.0) if front else b.u(d / 2 - 1.0, d / 2 + 1.0), 0.0
         for _ in range(int(b.rng.integers(1, 4))):
@@ -287,7 +287,7 @@ def warehouse(b: _AssetBuilder) -> Scene:
             zz += s
     for _ in range(5):
         b.put("traffic_cone", b.u(1.0, w - 1.0), d / 2 + b.u(-1.5, 1.5), height=b.u(0.3, 0.5))
-    _floor_clutter(b, 1.0, d / 2 - 1.5, w - 1.0, d / 2 + 1.5, 12)
+    _floor_clutter(b, 1.0, d / 2 - 1.5, w - 1.0, d / 2 + 1.5, 36)
     _shelf_with_clutter(b, 0.25, d / 2, 2.4, 0.45, 2.2, 90.0)
     return b.scene("warehouse", "indoor", *_indoor_view(w, d))
 
@@ -301,7 +301,7 @@ def kids_room(b: _AssetBuilder) -> Scene:
     _clutter(b, w / 2 - 0.4, d / 2 - 0.25, w / 2 + 0.4, d / 2 + 0.25, 0.5, 8,
              names=("lego", "domino", "toy_cylinder", "toy_prism", "torus"))
     toys = ("shape_sorter", "lego", "domino", "toy_cylinder", "toy_prism", "soccerball", "teddy", "torus")
-    for _ in range(40):  # toys on the floor, at play-box sizes (resized to 8-30 cm)
+    for _ in range(60):  # toys on the floor, at play-box sizes (resized to 8-30 cm)
         b.put(b.pick(toys), b.u(0.3, w - 0.3), b.u(0.3, d - 1.1), height=b.u(0.08, 0.3))
     _plant(b, 0.4, 0.4, b.u(0.6, 1.0))
     _shelf_with_clutter(b, w - 0.2, d / 2, 1.2, 0.3, 1.2, 90.0)
@@ -343,14 +343,14 @@ def cluttered_office(b: _AssetBuilder) -> Scene:
         _chair(b, x, d / 2 - 0.65, 180.0 + b.u(-25, 25))
         b.add(box((x - 0.25, d / 2 + 0.15, 0.74), (x + 0.25, d / 2 + 0.2, 1.08)))  # monitor
         b.add(cylinder((x, d / 2 + 0.2, 0.74), 0.08, 0.02), solid=False)
-        _clutter(b, x - 0.6, d / 2 - 0.3, x + 0.6, d / 2 + 0.1, 0.74, 9)
+        _clutter(b, x - 0.6, d / 2 - 0.3, x + 0.6, d / 2 + 0.1, 0.74, 14)
     for k in range(3):
         _shelf_with_clutter(b, 1.0 + k * (w - 2.0) / 2, d - 0.22, 1.0, 0.35, 2.0, 0.0)
     b.put(b.pick(("r2d2", "husky")), w / 2, 0.9, solid=True)
     _plant(b, 0.5, 0.5, b.u(0.8, 1.4))
     _plant(b, w - 0.5, 0.5, b.u(0.8, 1.4))
     _cabinet(b, 0.3, 1.2, 0.5, 0.5, 0.7, -90.0)
-    _floor_clutter(b, 0.5, 0.4, w - 0.5, d / 2 - 0.9, 14)
+    _floor_clutter(b, 0.5, 0.4, w - 0.5, d / 2 - 0.9, 34)
     _curtain(b, 1.0, w - 1.0, d - 0.45, 2.1, min(h - 0.05, 2.6), folds=30, depth=0.04)  # blind
     return b.scene("cluttered_office", "indoor", *_indoor_view(w, d))
 
