@@ -26,13 +26,10 @@ import numpy as np
 from ..kernels.depth import prepare
 
 __all__ = ["TILE", "NoiseSamples", "estimate_noise", "estimate_noise_map", "noise_levels", "noise_pass",
-           "noise_samples", "noise_tiles"]
+           "noise_tiles"]
 
 _MAD = 0.6744897501960817  # median of |N(0, 1)|
 _SQRT6 = 6.0 ** 0.5
-#: Rows sampled: every STRIDE-th row (and every STRIDE-th column for the vertical triples);
-#: ~29k samples on 640x480, a median to ~1 %.
-STRIDE = 12
 #: Side of the square tiles of the per-region noise level (:func:`estimate_noise_map`).
 TILE = 64
 #: Inside a tile, every TILE_STRIDE-th row (and column, for vertical triples) is sampled:
@@ -40,41 +37,6 @@ TILE = 64
 TILE_STRIDE = 12
 #: A tile with fewer triples reads as NaN (the image's level is used there).
 TILE_MIN = 100
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _samples(z, fx, fy, stride, out):
-    """Write the samples ``x sqrt(6)`` (module doc) of rows ``v % stride == 1`` into ``out``
-    (horizontal triples, then the vertical triples of every ``stride``-th column); return
-    their number."""
-    h, w = z.shape
-    m = 0
-    for v in range(1, h - 1, stride):
-        for u in range(1, w - 1):
-            a = np.float64(z[v, u - 1])
-            b = np.float64(z[v, u])
-            c = np.float64(z[v, u + 1])
-            if a == a and b == b and c == c:
-                out[m] = abs(1.0 / a - 2.0 / b + 1.0 / c) * fx * b
-                m += 1
-        for u in range(1, w - 1, stride):
-            a = np.float64(z[v - 1, u])
-            b = np.float64(z[v, u])
-            c = np.float64(z[v + 1, u])
-            if a == a and b == b and c == c:
-                out[m] = abs(1.0 / a - 2.0 / b + 1.0 / c) * fy * b
-                m += 1
-    return m
-
-
-def noise_samples(z: np.ndarray, fx: float, fy: float, *, stride: int = STRIDE) -> np.ndarray:
-    """The samples ``x sqrt(6)`` (see the module doc) of prepared depth ``z`` (NaN invalid):
-    1-D float64, horizontal triples on every ``stride``-th row, vertical triples on every
-    ``stride``-th column of those rows."""
-    h, w = z.shape
-    out = np.empty((h // stride + 1) * (w + w // stride + 2))
-    m = _samples(z, float(fx), float(fy), int(stride), out)
-    return out[:m]
 
 
 def noise_from_prepared(z: np.ndarray, fx: float, fy: float) -> float:
