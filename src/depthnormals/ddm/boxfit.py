@@ -43,6 +43,7 @@ import numpy as np
 from .._parallel import run_rows
 from .._validate import check_int, check_real
 from ..kernels.depth import prepare
+from ..kernels.eig3 import sym3_adjugate_apply
 from ..kernels.orient import store_normal
 
 __all__ = ["LOCAL_CAP", "SHIFTS", "box_fit_normals", "box_fit_windows", "choose_windows"]
@@ -178,18 +179,13 @@ def solve_window(n, su, sv, suu, suv, svv, sw, suw, svw, sww):
     """Least squares ``w = a du + b dv + c`` from the ten sums: (a, b, c, RSS, ok), ``ok``
     False where the window has fewer than :data:`MIN_POINTS` points or is degenerate
     (collinear); branch-free (the values are then meaningless)."""
-    c00 = svv * n - sv * sv
-    c01 = sv * su - suv * n
-    c02 = suv * sv - svv * su
-    c11 = suu * n - su * su
-    c12 = su * suv - suu * sv
-    c22 = suu * svv - suv * suv
-    det = suu * c00 + suv * c01 + su * c02
+    # normal equations: [[suu suv su] [suv svv sv] [su sv n]] (a, b, c) = (suw, svw, sw)
+    x, y, t, det = sym3_adjugate_apply(suu, suv, su, svv, sv, n, suw, svw, sw)
     ok = (n >= MIN_POINTS) & (det > 1e-9 * n * n * n)
     inv = 1.0 / (det if ok else 1.0)
-    a = (c00 * suw + c01 * svw + c02 * sw) * inv
-    b = (c01 * suw + c11 * svw + c12 * sw) * inv
-    c = (c02 * suw + c12 * svw + c22 * sw) * inv
+    a = x * inv
+    b = y * inv
+    c = t * inv
     rss = sww - (a * suw + b * svw + c * sw)
     return a, b, c, (rss if rss > 0.0 else 0.0), ok
 

@@ -11,6 +11,7 @@ import numpy as np
 from .._parallel import run_rows
 from .._validate import check_positive
 from ..kernels.depth import new_output, prepare
+from ..kernels.eig3 import sym3_adjugate_apply
 from ..kernels.orient import store_normal
 from ..kernels.stencils import gradient_kernels, stencil_derivative
 from .pointcloud import check_window
@@ -223,15 +224,7 @@ def _fals_solve_row(yq, acc, xs_, bx_, by_, bz_, flag_, lo, hi):
         m11 = a7[k]
         m12 = a8[k]
         m22 = a9[k]
-        c00 = m11 * m22 - m12 * m12
-        c01 = m02 * m12 - m01 * m22
-        c02 = m01 * m12 - m02 * m11
-        c11 = m00 * m22 - m02 * m02
-        c12 = m01 * m02 - m00 * m12
-        c22 = m00 * m11 - m01 * m01
-        nx = c00 * s0 + c01 * s1 + c02 * s2
-        ny = c01 * s0 + c11 * s1 + c12 * s2
-        nz = c02 * s0 + c12 * s1 + c22 * s2
+        nx, ny, nz, _ = sym3_adjugate_apply(m00, m01, m02, m11, m12, m22, s0, s1, s2)
         nrm = math.sqrt(nx * nx + ny * ny + nz * nz)
         inv = 1.0 / nrm
         dot = nx * xs[k] + ny * yq + nz  # dot(n, X) / z

@@ -6,7 +6,7 @@ import math
 
 import numba as nb
 
-__all__ = ["smallest_eigenvector", "smallest_eigenvector_newton"]
+__all__ = ["smallest_eigenvector", "smallest_eigenvector_newton", "sym3_adjugate_apply"]
 
 _TWO_PI_3 = 2.0 * math.pi / 3.0
 
@@ -40,6 +40,23 @@ def _null_vector(a00, a01, a02, a11, a12, a22, lam):
     z = c0z if b0 else (c1z if b1 else c2z)
     d = d0 if b0 else (d1 if b1 else d2)
     return x, y, z, d
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def sym3_adjugate_apply(m00, m01, m02, m11, m12, m22, s0, s1, s2):
+    """``adj(M) s`` and ``det(M)`` for the symmetric matrix ``M = [[m00 m01 m02] ...]``:
+    ``M^-1 s = adj(M) s / det(M)`` without a division (``(x, y, z, det)``). Branch-free, so
+    loops calling it vectorise. The normal equations of FALS and of the box-fit's planes."""
+    c00 = m11 * m22 - m12 * m12
+    c01 = m02 * m12 - m01 * m22
+    c02 = m01 * m12 - m02 * m11
+    c11 = m00 * m22 - m02 * m02
+    c12 = m01 * m02 - m00 * m12
+    c22 = m00 * m11 - m01 * m01
+    x = c00 * s0 + c01 * s1 + c02 * s2
+    y = c01 * s0 + c11 * s1 + c12 * s2
+    z = c02 * s0 + c12 * s1 + c22 * s2
+    return x, y, z, m00 * c00 + m01 * c01 + m02 * c02
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
