@@ -33,7 +33,7 @@ import numba as nb
 import numpy as np
 
 from .._parallel import run_rows
-from ..kernels.orient import store_normal
+from ..kernels.orient import store_nan, store_normal
 from .boxfit import box_fit_from_prepared
 from .noise import TILE, noise_pass, noise_tiles
 
@@ -82,9 +82,7 @@ def _mask_rows(v0, v1, base, out):
         for u in range(w):
             x = base[v, u, 0] + base[v, u, 1] + base[v, u, 2]
             if not (x - x == 0.0):
-                out[v, u, 0] = np.nan
-                out[v, u, 1] = np.nan
-                out[v, u, 2] = np.nan
+                store_nan(out, v, u)
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -110,9 +108,7 @@ def _keep_rows(v0, v1, z, base, kappa, fx, fy, cx, cy, out):
             y = np.float64(base[v, u, 1])
             t = np.float64(base[v, u, 2])
             if not (x + y + t - (x + y + t) == 0.0):
-                out[v, u, 0] = np.nan
-                out[v, u, 1] = np.nan
-                out[v, u, 2] = np.nan
+                store_nan(out, v, u)
                 continue
             fxx = np.float64(out[v, u, 0])
             if not (fxx == fxx):

@@ -44,7 +44,7 @@ from .._parallel import run_rows
 from .._validate import check_int, check_real
 from ..kernels.depth import prepare
 from ..kernels.eig3 import sym3_adjugate_apply
-from ..kernels.orient import store_normal
+from ..kernels.orient import store_nan, store_normal
 
 __all__ = ["LOCAL_CAP", "SHIFTS", "box_fit_normals", "box_fit_windows", "choose_windows"]
 
@@ -354,9 +354,7 @@ def _choose_rows(v0, v1, z, fit_n, score, big_n, big_score, shift, gate, big_gat
         for u in range(w):
             zq = z[v, u]
             if not (zq == zq):
-                out[v, u, 0] = np.nan
-                out[v, u, 1] = np.nan
-                out[v, u, 2] = np.nan
+                store_nan(out, v, u)
                 continue
             if use_big and np.float64(big_score[v, u]) <= big_gate:
                 store_normal(out, v, u, np.float64(big_n[0, v, u]), np.float64(big_n[1, v, u]),
@@ -378,9 +376,7 @@ def _choose_rows(v0, v1, z, fit_n, score, big_n, big_score, shift, gate, big_gat
                         bv = r
                         bu = c
             if not (best < np.inf):
-                out[v, u, 0] = np.nan
-                out[v, u, 1] = np.nan
-                out[v, u, 2] = np.nan
+                store_nan(out, v, u)
                 continue
             store_normal(out, v, u, np.float64(fit_n[0, bv, bu]), np.float64(fit_n[1, bv, bu]),
                          np.float64(fit_n[2, bv, bu]), (u - cx) / fx, (v - cy) / fy, 1.0)
@@ -474,14 +470,10 @@ def _choose_local_rows(v0, v1, z, score, plane, big_n, big_score, shift, gates, 
                         bv = kv[j]
                         bu = ku[j]
                 if not (best < np.inf):
-                    out[v, u, 0] = np.nan
-                    out[v, u, 1] = np.nan
-                    out[v, u, 2] = np.nan
+                    store_nan(out, v, u)
                     continue
             if not (score[bv, bu] < np.inf):
-                out[v, u, 0] = np.nan
-                out[v, u, 1] = np.nan
-                out[v, u, 2] = np.nan
+                store_nan(out, v, u)
                 continue
             pa = np.float64(plane[0, bv, bu])
             pb = np.float64(plane[1, bv, bu])

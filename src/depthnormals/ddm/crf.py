@@ -15,7 +15,7 @@ import numpy as np
 
 from .._parallel import run_rows
 from ..kernels.depth import Pinhole
-from ..kernels.orient import store_normal
+from ..kernels.orient import store_nan, store_normal
 from .correlation import pearson_pair
 from .crf_ring import (
     _BIG,
@@ -26,7 +26,7 @@ from .crf_ring import (
     sim_coefficients,
     similarity_ring_row,
 )
-from .selection import CROSS, _nan3, _ok
+from .selection import CROSS, _ok
 
 __all__ = ["crf_step"]
 
@@ -74,7 +74,7 @@ def _crf_pixel(z, cur, anchor, kq, sim_mode, tau, sigma, lam, offs, cam, v, u, w
     fx, fy, cx, cy = cam
     zq = z[v, u]
     if not (zq == zq):
-        _nan3(out, v, u)
+        store_nan(out, v, u)
         return
     px = (u - cx) * zq / fx
     py = (v - cy) * zq / fy
@@ -144,7 +144,7 @@ def _crf_pixel(z, cur, anchor, kq, sim_mode, tau, sigma, lam, offs, cam, v, u, w
     if found:
         store_normal(out, v, u, bx, by, bz, px, py, zq)
     else:
-        _nan3(out, v, u)
+        store_nan(out, v, u)
 
 
 @nb.njit(**_JIT)

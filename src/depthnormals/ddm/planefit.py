@@ -18,7 +18,7 @@ import numba as nb
 import numpy as np
 
 from .._parallel import run_rows
-from ..kernels.orient import store_normal
+from ..kernels.orient import store_nan, store_normal
 
 __all__ = ["plane_fit_select"]
 
@@ -44,9 +44,7 @@ def _plane_fit_rows(v0, v1, z, n, fx, fy, cx, cy, rc, rs, out):
         for u in range(w):
             zq = z[v, u]
             if not (zq == zq):
-                out[v, u, 0] = np.nan
-                out[v, u, 1] = np.nan
-                out[v, u, 2] = np.nan
+                store_nan(out, v, u)
                 continue
             # the support: valid points of the window (missing ones cost every candidate alike)
             m = 0

@@ -19,7 +19,7 @@ import numpy as np
 
 from .._parallel import run_rows
 from ..kernels.depth import C_FX, C_FY, C_INF, C_MAX, C_ONE, C_ZERO, Pinhole, row_arrays
-from ..kernels.orient import store_normal
+from ..kernels.orient import store_nan, store_normal
 
 __all__ = ["CROSS", "SQUARE", "clamp_key", "cross_select_row", "inconsistency", "inconsistency_pq",
            "select_min", "select_ring_row"]
@@ -46,13 +46,6 @@ def _ok(z, n, r, c):
     if r < 0 or r >= h or c < 0 or c >= w:
         return False
     return z[r, c] == z[r, c] and n[r, c, 0] == n[r, c, 0]
-
-
-@nb.njit(**_INL)
-def _nan3(out, v, u):
-    out[v, u, 0] = np.nan
-    out[v, u, 1] = np.nan
-    out[v, u, 2] = np.nan
 
 
 @nb.njit(**_INL)
@@ -138,7 +131,7 @@ def _select_pixel(z, normals, key, offs, fx, fy, cx, cy, v, u, selfw, eps, out):
     """
     zq = z[v, u]
     if not (zq == zq):
-        _nan3(out, v, u)
+        store_nan(out, v, u)
         return
     rl, rr, rt, rb = _ratios(z, v, u)
     A = u - cx
@@ -175,7 +168,7 @@ def _select_pixel(z, normals, key, offs, fx, fy, cx, cy, v, u, selfw, eps, out):
         store_normal(out, v, u, np.float64(normals[bv, bu, 0]), np.float64(normals[bv, bu, 1]),
                      np.float64(normals[bv, bu, 2]), A * zq / fx, B * zq / fy, zq)
     else:
-        _nan3(out, v, u)
+        store_nan(out, v, u)
 
 
 @nb.njit(**_INL)

@@ -9,7 +9,7 @@ import numpy as np
 
 from .._parallel import run_rows
 
-__all__ = ["finish", "oriented_unit", "store_normal"]
+__all__ = ["finish", "oriented_unit", "store_nan", "store_normal"]
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -39,6 +39,14 @@ def store_normal(out, v, u, nx, ny, nz, px, py, pz):
     out[v, u, 2] = t
 
 
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def store_nan(out, v, u):
+    """No normal at pixel (v, u): NaN in all three components."""
+    out[v, u, 0] = np.nan
+    out[v, u, 1] = np.nan
+    out[v, u, 2] = np.nan
+
+
 @nb.njit(cache=True, error_model="numpy", nogil=True)
 def _finish_rows(v0, v1, normals, z, fx, fy, cx, cy):
     w = z.shape[1]
@@ -46,9 +54,7 @@ def _finish_rows(v0, v1, normals, z, fx, fy, cx, cy):
         for u in range(w):
             zz = z[v, u]
             if not (zz == zz):
-                normals[v, u, 0] = np.nan
-                normals[v, u, 1] = np.nan
-                normals[v, u, 2] = np.nan
+                store_nan(normals, v, u)
                 continue
             store_normal(normals, v, u, normals[v, u, 0], normals[v, u, 1], normals[v, u, 2],
                          (u - cx) * zz / fx, (v - cy) * zz / fy, zz)
