@@ -2,7 +2,8 @@
 
 ``discontinuity_discrimination(normals, depth, K, ...)`` refines the output of any estimator;
 ``estimate_normals(..., method="<name>+")`` runs estimator ``<name>`` followed by it.
-``depth_curvature`` and ``kendall_map`` expose the two discriminators.
+``depth_curvature`` and ``kendall_map`` expose the two discriminators; ``plane_normals`` and
+``box_fit_normals`` the clean and noisy branches of the default ``selection="auto"``.
 """
 
 from ._module import (
@@ -17,6 +18,7 @@ from .boxfit import box_fit_normals
 from .correlation import CORRELATIONS, kendall_map
 from .curvature import CURVATURES, DERIVATIVES, depth_curvature
 from .noise import estimate_noise, estimate_noise_map
+from .planes import plane_normals
 from .threefn_plus import fused_plus
 
 __all__ = [
@@ -34,5 +36,6 @@ __all__ = [
     "fused_plus",
     "kendall_map",
     "module_defaults",
+    "plane_normals",
     "renamed_option_error",
 ]

@@ -25,7 +25,7 @@ NEIGHBOURHOODS = ("square", "cross")
 _CURV = (*CURVATURES, "none")
 
 
-SELECTIONS = ("curvature", "plane-fit", "box-fit", "auto")
+SELECTIONS = ("curvature", "plane-fit", "box-fit", "planes", "auto")
 
 #: Module options renamed so that no "+" form has two options of one name: old -> new.
 RENAMED = {"iterations": "crf_iterations"}
@@ -144,23 +144,30 @@ def discontinuity_discrimination(normals: Any, depth: Any, K: Any, *,
         a 5x5 footprint).
     derivatives : {"inverse-depth", "depth"}, default "inverse-depth"
         Discretisation of the metric curvatures (see :func:`depth_curvature`).
-    selection : {"auto", "curvature", "plane-fit", "box-fit"}, default "auto"
+    selection : {"auto", "curvature", "plane-fit", "box-fit", "planes"}, default "auto"
         Stage 1. ``"auto"`` (ours, issue 13; the default since then): estimate the depth noise
-        (:func:`depthnormals.estimate_noise`, in pixel footprints ``z / f``); below 0.03
-        (clean depth, e.g. renders) the curvature selection with the consistency margin
-        ``min(consistency, 0)`` (a neighbour replaces the pixel's normal only where it fits
-        the one-sided neighbourhood strictly better) and the estimator's abstentions kept
-        (NaN stays NaN); otherwise ``"box-fit"``. ``correlation`` / ``crf`` apply in the
-        clean branch only. So ``estimate_normals(depth, K, method="3f2n+")`` adapts to the
-        depth it is given: on the SSN-like synthetic benchmark with Gaussian noise 0.1 z/f it
-        gives 1.20 / 0.32 deg (indoor / outdoor) against 4.67 / 3.92 for the curvature
-        selection, and on the clean torus-knot frame 1.396 against 1.391.
+        (:func:`depthnormals.estimate_noise`, in pixel footprints ``z / f``); below 0.001
+        (clean depth: renders, simulation; float32 renders read ~1e-5) ``"planes"``,
+        otherwise ``"box-fit"``; the estimator's abstentions are kept (NaN stays NaN). With
+        the paper's CRF or a correlation (``crf=True`` or ``correlation != "none"``) depth
+        below 0.03 takes the curvature selection with the consistency margin
+        ``min(consistency, 0)`` instead. So ``estimate_normals(depth, K, method="3f2n+")``
+        adapts to the depth it is given: on the SSN-like synthetic benchmark with Gaussian
+        noise 0.1 z/f it gives 1.20 / 0.32 deg (indoor / outdoor) against 4.67 / 3.92 for
+        the curvature selection, and on the clean torus-knot frame 1.256 against 1.396.
+        ``"planes"`` (clean depth): nine one-sided planes of inverse depth per pixel, scored
+        by how far the pixels each relies on are from one plane (second differences of
+        ``1 / z`` in footprints), then three passes in which a pixel takes a neighbour's
+        plane wherever it passes through the pixel with a lower score
+        (:mod:`depthnormals.ddm.planes`; exact on every facet two pixels wide). The
+        estimator's own normals are not used, except that it keeps its abstentions.
         ``"curvature"`` is the paper's (Tables I and II pass it). ``"box-fit"``:
         least-squares planes of inverse depth over box windows (running sums, box-filter
         cost; :mod:`depthnormals.ddm.boxfit`), sized from the noise, edge-aware by a choice
         among the nine windows containing each pixel; the estimator's own normal kept where
         it agrees within the fit's noise (NaN where it abstained); for ``"3f2n+"`` the
-        box-fit alone. Measured in docs/3f2n-plus.md ("The noise-aware selection").
+        box-fit alone. Measured in docs/3f2n-plus.md ("The noise-aware selection", "Plane
+        hypotheses for clean depth").
         ``"plane-fit"`` (our earlier extension, for noisy depth): each pixel takes the
         candidate normal, within ``fit_radius``, whose plane through the candidate's point
         best explains the 5x5 points around the pixel (residuals in pixel footprints
@@ -264,6 +271,10 @@ def _options(*, curvature: str, correlation: str, crf: bool, sigma: float, lambd
         raise ValueError("the CRF weights its edges by the depth curvature k_q: pass a curvature "
                          "other than 'none', or crf=False for a correlation-only selection")
     check_choice(selection, "selection", SELECTIONS)
+    if selection in ("planes", "box-fit") and (crf or correlation != "none"):
+        raise ValueError(f"the CRF and the correlations need the curvature selection: pass "
+                         f"selection='curvature' (or 'auto', which takes it on clean depth), not "
+                         f"{selection!r}")
     sw = check_real(self_weight, "self_weight", minimum=0.0)
     if not 0.0 < sw <= 1.0:
         raise ValueError(f"self_weight must be in (0, 1]; got {self_weight!r}")
@@ -285,7 +296,7 @@ def _refine(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
             o: dict[str, Any]) -> np.ndarray:
     """The three stages on prepared depth (as ``row_dtype`` gives it); ``n0``/``k`` given:
     stage 1 already done."""
-    if n0 is None and o["selection"] in ("auto", "box-fit"):  # noise-aware (ddm/auto.py)
+    if n0 is None and o["selection"] in ("auto", "box-fit", "planes"):  # ddm/auto.py
         return refine_auto(z, fx, fy, cx, cy, n_in, o,
                            lambda oc: _refine(z, fx, fy, cx, cy, n_in, None, None, oc))
     curvature, correlation, crf = o["curvature"], o["correlation"], o["crf"]

@@ -4,12 +4,16 @@
 estimates the depth noise (:func:`depthnormals.ddm.noise.estimate_noise`, in pixel
 footprints ``z / f``) and picks the support from it:
 
-- **clean depth** (``sigma < NOISE_CLEAN``): the curvature selection of the paper (stage 1
-  of :func:`depthnormals.discontinuity_discrimination` with its other options) with the
-  consistency margin ``AUTO_CONSISTENCY`` (0): a neighbour's normal replaces the pixel's own
-  only where its one-sided tangent inconsistency (:func:`depthnormals.ddm.crf.inconsistency`)
-  is strictly smaller ("self wins unless beaten"); a pixel where the estimator abstained (NaN
-  at valid depth) stays NaN;
+- **clean depth** (``sigma < PLANES_NOISE``): the plane hypotheses and their propagation
+  (:mod:`depthnormals.ddm.planes`): nine one-sided planes of inverse depth at each pixel,
+  scored by how far the pixels they rely on are from one plane, then a neighbour's plane
+  wherever it passes through the pixel with a lower score; a pixel where the estimator
+  abstained (NaN at valid depth) stays NaN. With the paper's CRF or a correlation
+  (``crf=True`` or ``correlation != "none"``), depth below ``NOISE_CLEAN`` takes the paper's
+  curvature selection instead (stage 1 of :func:`depthnormals.discontinuity_discrimination`
+  with its other options), with the consistency margin ``AUTO_CONSISTENCY`` (0): a
+  neighbour's normal replaces the pixel's own only where its one-sided tangent
+  inconsistency (:func:`depthnormals.ddm.crf.inconsistency`) is strictly smaller;
 - **noisy depth**: the box-fit (:mod:`depthnormals.ddm.boxfit`): least-squares planes in
   inverse depth; a pixel takes the ``(2 BIG_RADIUS + 1)^2`` centred window where its residual
   variance is within ``GATE sigma^2`` (one plane within noise), and otherwise the best of the
@@ -20,9 +24,10 @@ footprints ``z / f``) and picks the support from it:
   radians. With another estimator's normals, its own normal is kept where it lies within the
   fit's noise (``KEEP_CHI2``) and NaN where it abstained.
 
-``"box-fit"`` is the second branch whatever the noise (the radius still follows the
-estimate, at least 1). Both are ours (issue 13); the constants were chosen by the
-measurements in docs/3f2n-plus.md ("The noise-aware selection").
+``"box-fit"`` is the noisy branch whatever the noise (the radius still follows the
+estimate, at least 1), ``"planes"`` the clean one. All of it is ours (issue 13); the
+constants were chosen by the measurements in docs/3f2n-plus.md ("The noise-aware selection",
+"Plane hypotheses for clean depth").
 """
 
 from __future__ import annotations
@@ -36,12 +41,18 @@ from .._parallel import run_rows
 from ..kernels.orient import store_nan, store_normal
 from .boxfit import box_fit_from_prepared
 from .noise import TILE, noise_pass, noise_tiles
+from .planes import planes_from_prepared
 
 __all__ = ["AUTO_CONSISTENCY", "BIG_RADIUS", "GATE", "KEEP_CHI2", "MAX_RADIUS", "NOISE_CLEAN",
-           "TARGET_STD", "auto_fused", "box_radius", "box_select", "refine_auto"]
+           "PLANES_NOISE", "TARGET_STD", "auto_fused", "box_radius", "box_select",
+           "plane_select", "refine_auto"]
 
-#: Noise (footprints) below which depth counts as clean: float32 renders read ~1e-4, the
-#: mildest noise of the benchmarks (Gaussian 0.1 z/f) 0.1.
+#: Noise (footprints) below which ``"auto"`` takes the plane hypotheses: float32 renders read
+#: ~1e-5, sensors 0.1 and more; the plane hypotheses' one-pixel stencils pass noise through,
+#: and the box-fit is ahead from ~0.0005 (analytic scenes, outdoor) to ~0.003 (indoor scenes).
+PLANES_NOISE = 1e-3
+#: Noise (footprints) below which the paper's CRF / correlation options (which need the
+#: curvature selection) still run on the curvature selection.
 NOISE_CLEAN = 0.03
 #: Predicted standard deviation (radians) of the box-fit normal that sets the radius of the
 #: small (edge) windows.
@@ -158,14 +169,42 @@ def box_select(z: np.ndarray, base: np.ndarray | None, fx: float, fy: float, cx:
     return out
 
 
+def plane_select(z: np.ndarray, base: np.ndarray | None, fx: float, fy: float, cx: float,
+                 cy: float) -> np.ndarray:
+    """The plane hypotheses on prepared depth ``z`` (:mod:`depthnormals.ddm.planes`); NaN
+    where ``base`` (the estimator's normals) has none."""
+    out = planes_from_prepared(z, fx, fy, cx, cy)
+    if base is not None:
+        run_rows(_mask_rows, z.shape[0], base, out)
+    return out
+
+
+def _branch(o: dict, sigma: float) -> str:
+    """Which selection ``o["selection"]`` runs at noise ``sigma``: ``"planes"``,
+    ``"box-fit"`` or ``"curvature"`` (the paper's CRF / correlation on clean depth)."""
+    sel = o["selection"]
+    if sel != "auto":
+        return sel
+    paper = o["crf"] or o["correlation"] != "none"
+    # NaN (too few valid pixels to measure) counts as clean
+    if not sigma >= (NOISE_CLEAN if paper else PLANES_NOISE):
+        return "curvature" if paper else "planes"
+    return "box-fit"
+
+
 def refine_auto(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
                 n_in: np.ndarray, o: dict, curvature_refine) -> np.ndarray:
-    """``selection="auto"`` / ``"box-fit"`` of the generic module path (any estimator's
-    normals ``n_in``); ``curvature_refine(o)`` runs the module's curvature path with options
-    ``o`` (the clean branch)."""
+    """``selection="auto"`` / ``"box-fit"`` / ``"planes"`` of the generic module path (any
+    estimator's normals ``n_in``); ``curvature_refine(o)`` runs the module's curvature path
+    with options ``o`` (the clean branch of the paper's CRF / correlation)."""
+    if o["selection"] == "planes":
+        return plane_select(z, n_in, fx, fy, cx, cy)
     p = noise_pass(z, fx, fy, tile=TILE)
     sigma = p.sigma
-    if o["selection"] == "box-fit" or sigma >= NOISE_CLEAN:
+    branch = _branch(o, sigma)
+    if branch == "planes":
+        return plane_select(z, n_in, fx, fy, cx, cy)
+    if branch == "box-fit":
         return box_select(z, n_in, fx, fy, cx, cy, sigma, levels=p.tiles())
     out = curvature_refine(_clean_options(o))
     run_rows(_mask_rows, z.shape[0], n_in, out)
@@ -180,17 +219,22 @@ def _clean_options(o: dict) -> dict:
 
 def auto_fused(fused_plus, depth, K, depth_scale, estimator_options: dict,
                module_options: dict, o: dict) -> np.ndarray | None:
-    """``"3f2n+"`` with ``selection="auto"`` / ``"box-fit"`` on the fused path: the noisy
-    branch is the box-fit alone (3F2N's normals are not computed, so the keep test of
-    :func:`box_select` is skipped: 3F2N never abstains at valid depth and under noise its
-    normals are rarely within the fit's noise), the clean branch the fused curvature
+    """``"3f2n+"`` with ``selection="auto"`` / ``"box-fit"`` / ``"planes"`` on the fused
+    path: the noisy branch is the box-fit alone and the clean one the plane hypotheses alone
+    (3F2N's normals are not computed: 3F2N never abstains at valid depth, so there is nothing
+    to keep of it), the clean branch of the paper's CRF / correlation the fused curvature
     selection with :data:`AUTO_CONSISTENCY`. None where ``fused_plus`` has no fused form."""
     from ..kernels.depth import prepare
 
     z, cam = prepare(depth, K, depth_scale)
+    if o["selection"] == "planes":
+        return plane_select(z, None, cam.fx, cam.fy, cam.cx, cam.cy)
     p = noise_pass(z, cam.fx, cam.fy, tile=TILE)
     sigma = p.sigma
-    if o["selection"] == "box-fit" or sigma >= NOISE_CLEAN:
+    branch = _branch(o, sigma)
+    if branch == "planes":
+        return plane_select(z, None, cam.fx, cam.fy, cam.cx, cam.cy)
+    if branch == "box-fit":
         return box_select(z, None, cam.fx, cam.fy, cam.cx, cam.cy, sigma, levels=p.tiles())
     c = _clean_options(o)
     return fused_plus(depth, K, depth_scale, estimator_options,

@@ -203,7 +203,7 @@ def fused_plus(depth: Any, K: Any, depth_scale: float | None, estimator_options:
             and ks == 3 and _is_str(agg, "median", "mean")):
         return None
     o = ModuleOptions(**module_options).normalised()
-    if o["selection"] in ("auto", "box-fit"):  # noise-aware: box-fit under noise (ddm/auto.py)
+    if o["selection"] in ("auto", "box-fit", "planes"):  # noise-aware (ddm/auto.py)
         return auto_fused(fused_plus, depth, K, depth_scale, estimator_options, module_options, o)
     if not (o["curvature"] in ("mean", "max") and o["derivatives"] == "inverse-depth"
             and o["slope"] == "min" and o["footprint"] == "pixel"

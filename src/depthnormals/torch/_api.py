@@ -13,6 +13,7 @@ from .._validate import check_int, check_real
 from ._common import Grid, finish, prepare
 from ._d2nt import VARIANTS, d2nt
 from ._ddm import refine
+from ._planes import plane_select
 from ._threefn import AGGREGATES, KERNELS, sne_roadseg, three_filters_to_normal
 
 __all__ = ["METHODS", "TORCH_MODULE_DEFAULTS", "EstimateNormals", "estimate_normals", "method_defaults",
@@ -27,7 +28,7 @@ _CHOICES = {
     "curvature": _CURVATURES, "correlation": ("kendall", "kendall-prose", "pearson", "none"),
     "derivatives": ("inverse-depth", "depth"), "slope": ("min", "central"),
     "footprint": ("pixel", "neighbours"), "neighbourhood": ("square", "cross"),
-    "selection": ("curvature", "plane-fit", "box-fit", "auto"),
+    "selection": ("curvature", "plane-fit", "box-fit", "planes", "auto"),
 }
 _MODULE_OPTIONS = ("curvature", "correlation", "crf", "sigma", "lambda_", "crf_iterations",
                    "neighbourhood", "derivatives", "slope", "footprint", "selection", "fit_radius",
@@ -54,11 +55,13 @@ def _read_defaults() -> dict[str, dict[str, Any]]:
     return out
 
 
-#: Where the torch module's defaults differ from the numba module's: the noise-aware
-#: ``selection="auto"`` (the numba default) is not implemented here, so the torch default is
-#: its clean branch, the curvature selection with the consistency margin 0 (equal to the
-#: numba default on clean depth; on noisy depth the numba default is the box-fit).
-TORCH_MODULE_DEFAULTS = {"selection": "curvature", "consistency": 0.0}
+#: Where the torch module's defaults differ from the numba module's: the margin of an
+#: explicit ``selection="curvature"`` (0 here, 0.1 in numba; the torch default was the
+#: curvature selection at margin 0 until session 6). ``selection="auto"`` (the default of
+#: both) is, in torch, the clean branch of the numba default only (there is no noise
+#: estimate and no box-fit here): the plane hypotheses, or with the CRF or a correlation the
+#: curvature selection at margin 0; equal to the numba default on clean depth.
+TORCH_MODULE_DEFAULTS = {"consistency": 0.0}
 
 
 _DEFAULTS = _read_defaults()
@@ -149,10 +152,14 @@ def _check_module(o: dict[str, Any]) -> None:
     if o["crf"] and o["curvature"] == "none":
         raise ValueError("the CRF weights its edges by the depth curvature k_q: pass a curvature "
                          "other than 'none', or crf=False for a correlation-only selection")
-    if o["selection"] != "curvature":
+    if o["selection"] not in ("curvature", "planes", "auto"):
         raise ValueError(f"selection={o['selection']!r} is not implemented in depthnormals.torch "
-                         "(only 'curvature'); use depthnormals.estimate_normals for the plane-fit, "
-                         "box-fit and noise-aware 'auto' selections")
+                         "(only 'curvature', 'planes' and 'auto', the clean branch of the numba "
+                         "default); use depthnormals.estimate_normals for the plane-fit and box-fit "
+                         "selections")
+    if o["selection"] == "planes" and (o["crf"] or o["correlation"] != "none"):
+        raise ValueError("the CRF and the correlations need the curvature selection: pass "
+                         "selection='curvature' (or 'auto'), not 'planes'")
 
 
 def _pad(base: str, o: dict[str, Any], refined: bool) -> int:
@@ -190,11 +197,13 @@ def estimate_normals(depth: torch.Tensor, K: Any, *, method: str = "3f2n+",
         The options of the numba estimator of the same name, with the same defaults
         (:func:`method_defaults`): ``kernel``, ``kernel_size``, ``aggregate`` (3F2N),
         ``variant`` (D2NT) and, for ``"<name>+"``, those of
-        :func:`depthnormals.discontinuity_discrimination` with ``selection="curvature"`` only
-        (``"plane-fit"``, ``"box-fit"`` and ``"auto"`` raise ValueError). Module defaults:
-        the numba module's except :data:`TORCH_MODULE_DEFAULTS`, ``selection="curvature",
-        consistency=0.0``, the clean branch of the numba default ``selection="auto"``: the
-        same normals on clean depth; on noisy depth (noise >= 0.03 pixel footprints,
+        :func:`depthnormals.discontinuity_discrimination` with ``selection`` one of
+        ``"auto"``, ``"planes"``, ``"curvature"`` (``"plane-fit"`` and ``"box-fit"`` raise
+        ValueError). Module defaults: the numba module's, except
+        :data:`TORCH_MODULE_DEFAULTS` (``consistency=0.0``). ``selection="auto"`` is here
+        the clean branch of the numba default: the plane hypotheses (or, with the CRF or a
+        correlation, the curvature selection at margin 0), so the same normals as the numba
+        default on clean depth; on noisy depth (noise >= 0.001 pixel footprints,
         :func:`depthnormals.estimate_noise`) the numba default is the box-fit, not this.
 
     Returns
@@ -228,13 +237,22 @@ def estimate_normals(depth: torch.Tensor, K: Any, *, method: str = "3f2n+",
     o = _check_options(method, options)
     z, valid, cam, out_dtype = prepare(depth, K, depth_scale)
     grid = Grid(z, valid, _pad(base, o, method.endswith("+")))
+    planes = method.endswith("+") and (o["selection"] == "planes" or (
+        o["selection"] == "auto" and not o["crf"] and o["correlation"] == "none"))
+    if planes and base == "3f2n":  # 3F2N never abstains at valid depth: nothing of it is kept
+        return finish(*plane_select(grid, cam, valid), invalid, out_dtype)
     if base == "3f2n":
         n = three_filters_to_normal(grid, cam, o["kernel"], o["kernel_size"], o["aggregate"])
     elif base == "d2nt":
         n = d2nt(grid, cam, o["variant"])
     else:
         n = sne_roadseg(grid, cam)
-    if method.endswith("+"):
+    if planes:
+        n = plane_select(grid, cam, n[3])
+    elif method.endswith("+"):
+        if o["selection"] == "auto":  # with the CRF / a correlation: margin min(consistency, 0)
+            eps = o["consistency"]
+            o = {**o, "selection": "curvature", "consistency": None if eps is None else min(eps, 0.0)}
         n = refine(grid, cam, n[:3], n[3], o)
     return finish(*n, invalid, out_dtype)
 
