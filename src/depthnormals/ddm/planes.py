@@ -18,10 +18,12 @@ lies on one plane exactly when its second differences of ``w`` vanish. Each pixe
    (ties: central first). (The four mixed stencils, central along one axis and one-sided
    along the other, change nothing measurable once the planes propagate: torus knot 1.2555
    vs 1.2556 deg, and are left out.)
-2. **Propagation** (:data:`ITERATIONS` synchronous passes over the 8 neighbours, as in
-   PatchMatch stereo's spatial propagation): a pixel takes its neighbour ``q``'s plane when
-   ``|w(p) - plane_q(p)| z f + score_q`` is below its own score, i.e. when ``q``'s plane is
-   better supported and passes through ``p``. Where no stencil at ``p`` lies on one plane
+2. **Propagation** (:data:`ITERATIONS` synchronous passes over the 8 neighbours, as in the
+   spatial propagation of PatchMatch stereo: M. Bleyer, C. Rhemann, C. Rother, "PatchMatch
+   Stereo - Stereo Matching with Slanted Support Windows", BMVC 2011): a pixel takes its
+   neighbour ``q``'s plane when ``|w(p) - plane_q(p)| z f + score_q`` is below its own
+   score, i.e. when ``q``'s plane is better supported and passes through ``p``. Where no
+   stencil at ``p`` lies on one plane
    (a facet narrower than two pixels, a one-pixel ledge) this carries the plane of the
    surface ``p`` belongs to from where it is well measured.
 
@@ -321,6 +323,21 @@ def plane_normals(depth: np.ndarray, K: np.ndarray, *, iterations: int = ITERATI
     normals : ndarray, shape (H, W, 3), float32
         Unit normals facing the camera; NaN at invalid depth and where a valid pixel has no
         valid neighbour along an axis and no neighbour's plane reaches it.
+
+    Notes
+    -----
+    Ours; the propagation step is that of PatchMatch stereo (M. Bleyer, C. Rhemann,
+    C. Rother, "PatchMatch Stereo - Stereo Matching with Slanted Support Windows", BMVC 2011),
+    with planes of inverse depth instead of disparity. Interpretation and measurements:
+    docs/3f2n-plus.md, "Plane hypotheses for clean depth".
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from depthnormals.ddm import plane_normals
+    >>> z = np.full((4, 5), 2.0)
+    >>> plane_normals(z, (500.0, 500.0, 2.0, 1.5))[1, 2].tolist()
+    [-0.0, -0.0, -1.0]
     """
     from .._validate import check_int
     from ..kernels.depth import prepare

@@ -70,8 +70,8 @@ _DEFAULTS = _read_defaults()
 def method_defaults(method: str) -> dict[str, Any]:
     """The options of ``method`` and their defaults: those of the numba library, read from
     its signatures (so the torch path follows when they change), except the module's
-    ``selection`` and ``consistency`` (:data:`TORCH_MODULE_DEFAULTS`: the torch path has no
-    noise-aware ``"auto"``; its default is auto's clean branch).
+    ``consistency`` (:data:`TORCH_MODULE_DEFAULTS`); ``selection="auto"`` is, in torch, the
+    clean branch of the numba default (no noise estimate here).
 
     Examples
     --------
