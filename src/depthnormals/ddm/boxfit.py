@@ -237,6 +237,39 @@ def _solve_row_planes(t0, t1m0, t1m1, t1w, t2m0, fx, out_s, out_a, out_b, out_c)
         out_c[u] = c
 
 
+@nb.njit(cache=True, error_model="numpy")
+def _run_moments(t0, t1, t2, e, lv, rf, r1):
+    """Running column sums of a count: ``sum 1``, ``sum dv``, ``sum dv^2`` when row
+    ``v + r`` (``e``) enters and ``v - r - 1`` (``lv``) leaves (:func:`_row_sums`'s
+    recurrences)."""
+    for u in range(t0.size):
+        em = e[u]
+        lm = lv[u]
+        n0 = t0[u] + em - lm
+        s1 = t1[u] + rf * lm + r1 * em
+        t2[u] = t2[u] - rf * rf * lm + r1 * r1 * em - 2.0 * s1 + n0
+        t1[u] = s1 - n0
+        t0[u] = n0
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _run_first(t0, t1, e, lv, rf, r1):
+    """Running column sums ``sum x``, ``sum dv x`` (as :func:`_run_moments`)."""
+    for u in range(t0.size):
+        eu = e[u]
+        lu = lv[u]
+        n0 = t0[u] + eu - lu
+        t1[u] = t1[u] + rf * lu + r1 * eu - n0
+        t0[u] = n0
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _run_plain(t0, e, lv):
+    """Running column sum ``sum x``."""
+    for u in range(t0.size):
+        t0[u] += e[u] - lv[u]
+
+
 @nb.njit(**_JIT)
 def _fit_rows(v0, v1, z, fx, fy, cx, cy, r, out_n, out_score, out_plane, want_plane, want_n):
     """Rows ``[v0, v1)`` of the centred-window fits: ``out_n`` (3, H, W) float32 planar unit
@@ -294,27 +327,14 @@ def _fit_rows(v0, v1, z, fx, fy, cx, cy, r, out_n, out_score, out_plane, want_pl
         else:  # running: row v + r enters, row v - r - 1 leaves
             e = ring[(v + r) % span] if v + r < h else zero
             lv = ring[(v - r - 1) % span] if v - r - 1 >= 0 else zero
-            for u in range(w):
-                em = e[_R_N, u]
-                lm = lv[_R_N, u]
-                n0 = t0[_R_N, u] + em - lm
-                s1 = t1m0[u] + rf * lm + r1 * em
-                t2m0[u] = t2m0[u] - rf * rf * lm + r1 * r1 * em - 2.0 * s1 + n0
-                t1m0[u] = s1 - n0
-                t0[_R_N, u] = n0
-                eu = e[_R_U, u]
-                lu = lv[_R_U, u]
-                n0 = t0[_R_U, u] + eu - lu
-                t1m1[u] = t1m1[u] + rf * lu + r1 * eu - n0
-                t0[_R_U, u] = n0
-                ew = e[_R_W, u]
-                lw = lv[_R_W, u]
-                n0 = t0[_R_W, u] + ew - lw
-                t1w[u] = t1w[u] + rf * lw + r1 * ew - n0
-                t0[_R_W, u] = n0
-                t0[_R_UU, u] += e[_R_UU, u] - lv[_R_UU, u]
-                t0[_R_UW, u] += e[_R_UW, u] - lv[_R_UW, u]
-                t0[_R_WW, u] += e[_R_WW, u] - lv[_R_WW, u]
+            # one quantity per loop: few arrays per loop, so LLVM's runtime alias checks stay
+            # within its limit and every loop vectorises (one loop over all was scalar)
+            _run_moments(t0[_R_N], t1m0, t2m0, e[_R_N], lv[_R_N], rf, r1)
+            _run_first(t0[_R_U], t1m1, e[_R_U], lv[_R_U], rf, r1)
+            _run_first(t0[_R_W], t1w, e[_R_W], lv[_R_W], rf, r1)
+            _run_plain(t0[_R_UU], e[_R_UU], lv[_R_UU])
+            _run_plain(t0[_R_UW], e[_R_UW], lv[_R_UW])
+            _run_plain(t0[_R_WW], e[_R_WW], lv[_R_WW])
         if v < v0:  # rows before the band: only to carry the running sums to v0
             continue
         vp = v if want_plane else 0
