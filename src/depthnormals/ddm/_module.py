@@ -154,10 +154,10 @@ def discontinuity_discrimination(normals: Any, depth: Any, K: Any, *,
         ``min(consistency, 0)`` instead. So ``estimate_normals(depth, K, method="3f2n+")``
         adapts to the depth it is given: on the SSN-like synthetic benchmark with Gaussian
         noise 0.1 z/f it gives 1.20 / 0.32 deg (indoor / outdoor) against 4.67 / 3.92 for
-        the curvature selection, and on the clean torus-knot frame 1.256 against 1.396.
+        the curvature selection, and on the clean torus-knot frame 1.251 against 1.396.
         ``"planes"`` (clean depth): nine one-sided planes of inverse depth per pixel, scored
         by how far the pixels each relies on are from one plane (second differences of
-        ``1 / z`` in footprints), then three passes in which a pixel takes a neighbour's
+        ``1 / z`` in footprints), then four passes in which a pixel takes a neighbour's
         plane wherever it passes through the pixel with a lower score
         (:mod:`depthnormals.ddm.planes`; exact on every facet two pixels wide). The
         estimator's own normals are not used, except that it keeps its abstentions.

@@ -32,7 +32,7 @@ The normal of the plane ``w = c + a (u - u_p) + b (v - v_p)`` is
 (up to rounding), and on every facet at least two pixels wide along both axes.
 
 Measured (docs/3f2n-plus.md, "Plane hypotheses for clean depth"): the 3F2N torus-knot frame
-1.25-1.26 deg (the curvature selection 1.396, SDA-SNE 1.323), clean synthetic indoor 0.14 deg
+1.251 deg (the curvature selection 1.396, SDA-SNE 1.323), clean synthetic indoor 0.13 deg
 (SDA-SNE 0.277). It is a clean-depth method: its one-pixel stencils pass noise straight
 through, so ``selection="auto"`` uses it only below :data:`depthnormals.ddm.auto.PLANES_NOISE`.
 """
@@ -52,7 +52,7 @@ CENTRE_WEIGHT = 0.5
 #: an image axis leave the mixed difference at 0).
 LAPLACE_WEIGHT = 1e-4
 #: Synchronous propagation passes over the 8 neighbours.
-ITERATIONS = 3
+ITERATIONS = 4
 #: Score of a term whose pixels are missing (invalid depth or outside the image), footprints.
 _MISSING = np.float32(1e12)
 _F0 = np.float32(0.0)
@@ -239,14 +239,19 @@ def _planes_rows(v0, v1, z, fxw, fyw, cxw, cyw, ratio, lw, iters, out):
     for r in range(v0 - iters - 2, v0 - iters + 2):
         _w_row(z, r, W, r % 5)
     # stage k's rings: set k % 2 (E or O), index k // 2
-    EA = np.empty((n, 3, width + 2), z.dtype)
-    EB = np.empty((n, 3, width + 2), z.dtype)
-    EC = np.empty((n, 3, width + 2), z.dtype)
-    ES = np.empty((n, 3, width + 2), z.dtype)
-    OA = np.empty((n, 3, width + 2), z.dtype)
-    OB = np.empty((n, 3, width + 2), z.dtype)
-    OC = np.empty((n, 3, width + 2), z.dtype)
-    OS = np.empty((n, 3, width + 2), z.dtype)
+    # the eight rings in one allocation, each row padded to a stride that is not a multiple
+    # of 4 KiB apart: separate allocations put them at addresses that alias in the cache or
+    # not, by chance (the same run measured 6.9 or 8.3 ms, process to process)
+    stride = width + 2 + 16
+    ring = np.empty((8, n, 3, stride), z.dtype)
+    EA = ring[0]
+    EB = ring[1]
+    EC = ring[2]
+    ES = ring[3]
+    OA = ring[4]
+    OB = ring[5]
+    OC = ring[6]
+    OS = ring[7]
     for k in range(n):
         for s in range(3):
             for x in (0, width + 1):
@@ -313,7 +318,7 @@ def plane_normals(depth: np.ndarray, K: np.ndarray, *, iterations: int = ITERATI
         Planar depth; invalid pixels (0, negative, NaN, inf) get NaN normals.
     K : array_like, shape (3, 3), or Intrinsics
         Camera matrix (pixels, 0-based principal point).
-    iterations : int >= 0, keyword-only, default 3
+    iterations : int >= 0, keyword-only, default 4
         Propagation passes (0: the hypotheses alone).
     depth_scale : float, optional
         Metres per unit of integer depth.
