@@ -185,8 +185,9 @@ def discontinuity_discrimination(normals: Any, depth: Any, K: Any, *,
         1.0; clean sphere-before-wall error ratio to 3F2N 0.065 vs 0.388; noisy ratios
         +0.005).
     consistency : float >= 0 or None, default 0.1
-        Ours: the margin of ``selection="curvature"`` (the default ``"auto"`` uses
-        ``min(consistency, 0)`` on clean depth and no curvature selection on noisy depth).
+        Ours: the margin of ``selection="curvature"`` (the default ``"auto"`` uses the
+        curvature selection only with the paper's CRF or a correlation, on clean depth, at
+        ``min(consistency, 0)``).
         The curvature selection takes a neighbour's normal only if that normal fits the
         pixel's own depth about as well as the pixel's normal does. The fit is the one-sided
         tangent inconsistency ``S = min(rho_l, rho_r)^2 + min(rho_u, rho_d)^2``: ``rho_p`` is

@@ -241,8 +241,10 @@ def estimate_noise(depth: Any, K: Any, *, depth_scale: float | None = None) -> f
     -----
     Ours (issue 13), used by ``selection="auto"``, the default of
     :func:`depthnormals.discontinuity_discrimination` and so of every ``"<name>+"`` method:
-    below 0.03 footprints the depth counts as clean (docs/3f2n-plus.md). Quantised depth (e.g. 1 mm steps)
-    reads as its rounding noise where it exceeds the sensor's.
+    below 0.001 footprints it takes the plane hypotheses (clean depth), above the box-fit
+    (docs/3f2n-plus.md); with the paper's CRF or a correlation, below 0.03 the curvature
+    selection. Quantised depth (e.g. 1 mm steps) reads as its rounding noise where it exceeds
+    the sensor's.
 
     Examples
     --------
