@@ -5,7 +5,8 @@ estimates the depth noise (:func:`depthnormals.ddm.noise.estimate_noise`, in pix
 footprints ``z / f``) and picks the support from it:
 
 - **clean depth** (``sigma < PLANES_NOISE``): the plane hypotheses and their propagation
-  (:mod:`depthnormals.ddm.planes`): nine one-sided planes of inverse depth at each pixel,
+  (:mod:`depthnormals.ddm.planes`): five planes of inverse depth at each pixel (central and
+  one-sided),
   scored by how far the pixels they rely on are from one plane, then a neighbour's plane
   wherever it passes through the pixel with a lower score; a pixel where the estimator
   abstained (NaN at valid depth) stays NaN. With the paper's CRF or a correlation
@@ -179,17 +180,21 @@ def plane_select(z: np.ndarray, base: np.ndarray | None, fx: float, fy: float, c
     return out
 
 
-def _branch(o: dict, sigma: float) -> str:
-    """Which selection ``o["selection"]`` runs at noise ``sigma``: ``"planes"``,
-    ``"box-fit"`` or ``"curvature"`` (the paper's CRF / correlation on clean depth)."""
+def _branch(z: np.ndarray, fx: float, fy: float, o: dict):
+    """Which selection ``o["selection"]`` runs: ``("planes" | "box-fit" | "curvature", noise
+    pass)``, the curvature selection being the clean branch of the paper's CRF / correlation.
+    An explicit ``"planes"`` needs no noise estimate (the pass is then None)."""
     sel = o["selection"]
+    if sel == "planes":
+        return sel, None
+    p = noise_pass(z, fx, fy, tile=TILE)
     if sel != "auto":
-        return sel
+        return sel, p
     paper = o["crf"] or o["correlation"] != "none"
     # NaN (too few valid pixels to measure) counts as clean
-    if not sigma >= (NOISE_CLEAN if paper else PLANES_NOISE):
-        return "curvature" if paper else "planes"
-    return "box-fit"
+    if not p.sigma >= (NOISE_CLEAN if paper else PLANES_NOISE):
+        return ("curvature" if paper else "planes"), p
+    return "box-fit", p
 
 
 def refine_auto(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
@@ -197,15 +202,11 @@ def refine_auto(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
     """``selection="auto"`` / ``"box-fit"`` / ``"planes"`` of the generic module path (any
     estimator's normals ``n_in``); ``curvature_refine(o)`` runs the module's curvature path
     with options ``o`` (the clean branch of the paper's CRF / correlation)."""
-    if o["selection"] == "planes":
-        return plane_select(z, n_in, fx, fy, cx, cy)
-    p = noise_pass(z, fx, fy, tile=TILE)
-    sigma = p.sigma
-    branch = _branch(o, sigma)
+    branch, p = _branch(z, fx, fy, o)
     if branch == "planes":
         return plane_select(z, n_in, fx, fy, cx, cy)
     if branch == "box-fit":
-        return box_select(z, n_in, fx, fy, cx, cy, sigma, levels=p.tiles())
+        return box_select(z, n_in, fx, fy, cx, cy, p.sigma, levels=p.tiles())
     out = curvature_refine(_clean_options(o))
     run_rows(_mask_rows, z.shape[0], n_in, out)
     return out
@@ -227,15 +228,11 @@ def auto_fused(fused_plus, depth, K, depth_scale, estimator_options: dict,
     from ..kernels.depth import prepare
 
     z, cam = prepare(depth, K, depth_scale)
-    if o["selection"] == "planes":
-        return plane_select(z, None, cam.fx, cam.fy, cam.cx, cam.cy)
-    p = noise_pass(z, cam.fx, cam.fy, tile=TILE)
-    sigma = p.sigma
-    branch = _branch(o, sigma)
+    branch, p = _branch(z, cam.fx, cam.fy, o)
     if branch == "planes":
         return plane_select(z, None, cam.fx, cam.fy, cam.cx, cam.cy)
     if branch == "box-fit":
-        return box_select(z, None, cam.fx, cam.fy, cam.cx, cam.cy, sigma, levels=p.tiles())
+        return box_select(z, None, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma, levels=p.tiles())
     c = _clean_options(o)
     return fused_plus(depth, K, depth_scale, estimator_options,
                       {**module_options, "selection": "curvature", "consistency": c["consistency"]})

@@ -53,7 +53,8 @@ CENTRE_WEIGHT = 0.5
 LAPLACE_WEIGHT = 1e-4
 #: Synchronous propagation passes over the 8 neighbours.
 ITERATIONS = 4
-#: Score of a term whose pixels are missing (invalid depth or outside the image), footprints.
+#: Score of a term whose pixels are missing (invalid depth or outside the image), in units of
+#: 1/z (the hypotheses compare unscaled second differences; far above any real one).
 _MISSING = np.float32(1e12)
 _F0 = np.float32(0.0)
 _HALF = np.float32(0.5)

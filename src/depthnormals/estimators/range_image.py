@@ -68,15 +68,8 @@ def _fals_pixel(z, v, u, fx, fy, cx, cy, r, out):
     # pixel positions collinear <=> rays coplanar with the centre <=> M singular
     if n < 3 or (n * suu - su * su) * (n * svv - sv * sv) - (n * suv - su * sv) ** 2 <= 0:
         return
-    c00 = m11 * m22 - m12 * m12
-    c01 = m02 * m12 - m01 * m22
-    c02 = m01 * m12 - m02 * m11
-    c11 = m00 * m22 - m02 * m02
-    c12 = m01 * m02 - m00 * m12
-    c22 = m00 * m11 - m01 * m01
-    nx = c00 * s0 + c01 * s1 + c02 * s2  # adj(M) b: det(M) > 0 only scales
-    ny = c01 * s0 + c11 * s1 + c12 * s2
-    nz = c02 * s0 + c12 * s1 + c22 * s2
+    # adj(M) b: det(M) > 0 only scales
+    nx, ny, nz, _ = sym3_adjugate_apply(m00, m01, m02, m11, m12, m22, s0, s1, s2)
     store_normal(out, v, u, nx, ny, nz, (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
 
 
