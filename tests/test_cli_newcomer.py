@@ -146,7 +146,7 @@ def _lines(err: str, prefix: str) -> list[str]:
 
 def test_synth_progress_is_one_line_per_view_in_a_log(tmp_path, capsys):
     assert main(["synth", str(tmp_path / "s"), "--indoor", "1", "--outdoor", "0", "--views",
-                 "2", "--width", "128", "--height", "106", "--noise", "none"]) == 0
+                 "2", "--width", "128", "--height", "106", "--noise", "none", "--scenes", "procedural"]) == 0
     err = capsys.readouterr().err
     assert "\r" not in err
     assert _lines(err, "synth:") == ["synth: 1/2 view", "synth: 2/2 view"]

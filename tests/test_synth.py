@@ -89,7 +89,8 @@ def test_every_recipe_gt_consistent_with_depth(every_recipe):
 
 def test_same_command_twice_is_byte_identical(tmp_path):
     args = ["--indoor", "1", "--outdoor", "1", "--views", "2", "--seed", "3", "--width", "128",
-            "--height", "106", "--noise", "kinect_v2,gaussian,kinect_v1", "--no-progress"]
+            "--height", "106", "--noise", "kinect_v2,gaussian,kinect_v1", "--no-progress",
+            "--scenes", "procedural"]
     assert main(["synth", str(tmp_path / "a"), *args]) == 0
     assert main(["synth", str(tmp_path / "b"), *args]) == 0
     ha, hb = _tree_hashes(tmp_path / "a"), _tree_hashes(tmp_path / "b")
@@ -184,7 +185,7 @@ def test_bad_inputs_clear_errors_nothing_lost(tmp_path):
         generate(tmp_path / "mine", indoor=1, outdoor=0, views=1, progress=False)
     assert (tmp_path / "mine" / "notes.txt").read_text() == "keep"
     assert main(["synth", str(tmp_path / "file" / "x"), "--indoor", "1", "--outdoor", "0",
-                 "--views", "1", "--no-progress"]) == 1
+                 "--views", "1", "--no-progress", "--scenes", "procedural"]) == 1
 
 
 def test_progress_counter_without_tqdm(tmp_path, monkeypatch, capsys):

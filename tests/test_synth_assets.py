@@ -125,3 +125,22 @@ def test_cli_scene_set(tmp_path, capsys):
         make_scene("pantry", seed=-1)
     with pytest.raises(ValueError, match="unknown scene recipe"):
         make_scene("pantry2")
+
+
+def test_plain_synth_command_renders_the_realistic_set(tmp_path, capsys):
+    """Issue 25: the default scene set is ``mixed``; its indoor views are as cluttered as real frames."""
+    import statistics
+
+    from depthnormals.cli import main
+    from depthnormals.evaluate import synth_discontinuity_shares
+
+    out = tmp_path / "plain"
+    # the issue's command, clean only (the share is measured on the clean ground truth)
+    assert main(["synth", str(out), "--indoor", "3", "--outdoor", "0", "--views", "3", "--seed", "5",
+                 "--noise", "none", "--no-progress"]) == 0
+    meta = json.loads((out / "dataset.json").read_text())
+    assert meta["settings"]["scenes"] == "mixed"
+    shares = synth_discontinuity_shares(out)
+    assert statistics.median(f for s in shares for f in s.frames) >= 0.20
+    assert main(["synth", "x", "--dry-run"]) == 0
+    assert "scenes mixed" in capsys.readouterr().out

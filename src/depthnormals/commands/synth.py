@@ -8,11 +8,11 @@ from pathlib import Path
 #: Seconds of compilation on a cold numba cache (the rasteriser; see ``commands._firstrun``).
 FIRST_RUN_S = 5
 
-HELP = "render a synthetic benchmark: procedural and asset-mesh indoor/outdoor scenes, clean and noisy depth"
+HELP = "render a synthetic benchmark: asset-mesh and procedural indoor/outdoor scenes, clean and noisy depth"
 
 #: Values of the options a preset may set, when neither the preset nor the command line does.
 DEFAULTS = {"indoor": 10, "outdoor": 10, "views": 25, "noise": "kinect_v2", "width": 512, "height": 424,
-            "storage": "npy", "scenes": "procedural"}
+            "storage": "npy", "scenes": "mixed"}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -54,9 +54,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "of a running `dask scheduler` (needs the dask extra)")
     parser.add_argument("--batch-size", type=int, default=16, help="views per Dask task (default 16)")
     parser.add_argument("--scenes", default=None, choices=("procedural", "assets", "all", "mixed"),
-                        help="scene set: procedural recipes (default), recipes built from real asset "
-                             "meshes (needs the assets extra: pip install 'depthnormals[assets]'), all "
-                             "(procedural first) or mixed (assets first; the ssn preset's)")
+                        help="scene set: mixed (default: the asset-mesh recipes first, then the "
+                             "procedural ones most cluttered first; needs the assets extra: pip install "
+                             "'depthnormals[assets]'), procedural (the easy procedural recipes only; "
+                             "no extra), assets (asset-mesh recipes only) or all (procedural first)")
 
 
 def resolve(args: argparse.Namespace) -> dict:
@@ -81,7 +82,7 @@ def _print_plan(v: dict, noise: list[str]) -> None:
     variants = ["clean", *(s.split(":")[0] for s in noise)]
     print(f"plan: {len(plan)} scenes ({v['indoor']} indoor, {v['outdoor']} outdoor) x {v['views']} views = "
           f"{len(plan) * v['views']} views, {v['width']} x {v['height']}; variants {', '.join(variants)} "
-          f"({len(plan) * v['views'] * len(variants)} frames); storage {v['storage']}")
+          f"({len(plan) * v['views'] * len(variants)} frames); storage {v['storage']}; scenes {v['scenes']}")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -135,7 +135,8 @@ def asset_root() -> Path:
     spec = importlib.util.find_spec("pybullet_data")
     if spec is None or not spec.submodule_search_locations:
         raise ImportError("the asset-mesh scenes need the meshes shipped in pybullet: "
-                          "pip install 'depthnormals[assets]' (or pip install pybullet)")
+                          "pip install 'depthnormals[assets]' (or pip install pybullet); "
+                          "`depthnormals synth --scenes procedural` needs neither")
     return Path(next(iter(spec.submodule_search_locations))).parent
 
 
