@@ -16,11 +16,13 @@ Models
     Nguyen, Izadi, Lovell, "Modeling Kinect sensor noise for improved 3D reconstruction and
     tracking", 3DIMPVT 2012: axial ``sigma_z = 0.0012 + 0.0019 (z - 0.4)^2`` m, plus
     ``0.0001 / sqrt(z) * theta^2 / (pi/2 - theta)^2`` for ``theta > 60 deg``; lateral
-    ``sigma_L = 0.8 + 0.035 theta / (pi/2 - theta)`` px (each pixel reads the depth at a
-    position shifted by ``N(0, sigma_L)`` in u and v, nearest neighbour, so edges stay
-    sharp but jagged). Then disparity quantisation as in Khoshelham & Elberink, "Accuracy
-    and resolution of Kinect depth data", Sensors 2012: disparity ``d = f b / z`` with
-    ``f = 580`` px, ``b = 0.075`` m, rounded to 1/8 px.
+    ``sigma_L = 0.8 + 0.035 theta / (pi/2 - theta)`` px (a pixel reads the depth at a
+    position shifted by ``N(0, sigma_L)`` in u and v, nearest neighbour, where that position
+    lies across a depth edge, so edges stay sharp but jagged). The axial noise is added to the
+    disparity ``d = f b / z`` (``f = 580`` px, ``b = 0.075`` m) and correlated over a 9 x 9
+    window (the block matching); then the disparity is quantised to 1/8 px as in Khoshelham &
+    Elberink, "Accuracy and resolution of Kinect depth data", Sensors 2012: depth in plateaus
+    with steps ``z^2 / (8 f b)``.
 ``kinect_v2``
     Fankhauser et al., "Kinect v2 for mobile robot navigation: evaluation and modeling",
     ICAR 2015: axial ``sigma [mm] = 1.5 - 0.5 z + 0.3 z^2 + 0.1 z^1.5 theta^2 /
@@ -33,17 +35,19 @@ Models
 
 ``realsense_d4xx``
     Active stereo (:func:`realsense_d4xx_noise`): disparity ``d = f b / z`` (``b = 50`` mm,
-    D435) plus ``N(0, 0.08 px)``, rounded to 1/32 px, so the depth std grows as
-    ``z^2 * 0.08 / (f b)`` (Intel's D400 tuning white paper); edge fattening (the foreground
+    D435) plus ``N(0, 0.08 px)`` correlated over a 5 x 5 matching window, rounded to 1/32
+    px, so the depth std grows as ``z^2 * 0.08 / (f b)`` (Intel's D400 tuning white paper);
+    edge fattening (the foreground
     spreads ``fatten_px`` pixels into the background); holes where the second imager cannot
     see (left-right occlusion, :func:`stereo_occlusion`), nearer than ``f b / 126`` (the
     disparity search range) or farther than 10 m, and where the projected pattern is weak
     (far or grazing).
 ``tof``
     Continuous-wave time of flight (:func:`tof_noise`): flying pixels at depth jumps (mixed
-    returns), random error ``sigma ~ 1/sqrt(amplitude)``, amplitude ``albedo cos(theta) / z^2``
-    (Frank et al. 2009), scaled to the Azure Kinect specification (17 mm for 15 %
-    reflectivity at 3.86 m); low-amplitude pixels invalidated; 0.5 m minimum; 1 mm rounding.
+    returns), random error ``sigma ~ 1/sqrt(amplitude)`` (correlated over a Gaussian of
+    0.5 px), amplitude ``albedo cos(theta) / z^2`` (Frank et al. 2009), scaled to the Azure
+    Kinect specification (17 mm for 15 % reflectivity at 3.86 m); low-amplitude pixels
+    invalidated; 0.5 m minimum; 1 mm rounding.
 
 :func:`noise_std` gives the predicted standard deviation of the residual on a plane
 (rounding and quantisation included through Sheppard's correction ``step^2 / 12``).
@@ -78,19 +82,19 @@ MODELS = ("gaussian", "kinect_v1", "kinect_v2", "realsense_d4xx", "tof")
 
 _DEFAULTS: dict[str, dict[str, Any]] = {
     "gaussian": {"sigma": None, "sigma_px": 0.1},
-    "kinect_v1": {"focal": 580.0, "baseline": 0.075, "subpixel": 0.125},
+    "kinect_v1": {"focal": 580.0, "baseline": 0.075, "subpixel": 0.125, "window": 9},
     "kinect_v2": {"min_range": 0.5, "max_range": 4.5, "dropout_deg": 78.0, "dropout_width_deg": 3.0,
                   "rounding": 0.001, "supersample": 3},
     "realsense_d4xx": {"baseline": 0.050, "focal": None, "subpixel": 0.08, "quantum": 1.0 / 32.0,
                        "max_disparity": 126.0, "max_range": 10.0, "fatten_px": 2, "fatten_jump": 0.05,
-                       "hole_range": 6.0, "hole_width": 0.6, "hole_blob": 4},
+                       "hole_range": 6.0, "hole_width": 0.6, "hole_blob": 4, "window": 5},
     "tof": {"albedo": 0.5, "sigma_ref": 0.017, "ref_range": 3.86, "ref_albedo": 0.15, "cutoff": 1.0,
-            "min_range": 0.5, "rounding": 0.001, "flying_jump": 0.02, "supersample": 3},
+            "min_range": 0.5, "rounding": 0.001, "flying_jump": 0.02, "supersample": 3, "blur": 0.5},
 }
 
 #: Settings that must be whole numbers (parsed from the spec as floats, then checked).
-_INTEGER = {"kinect_v2": ("supersample",), "realsense_d4xx": ("fatten_px", "hole_blob"),
-            "tof": ("supersample",)}
+_INTEGER = {"kinect_v1": ("window",), "kinect_v2": ("supersample",),
+            "realsense_d4xx": ("fatten_px", "hole_blob", "window"), "tof": ("supersample",)}
 
 
 def parse_noise_spec(spec: str) -> tuple[str, dict[str, Any]]:
@@ -128,6 +132,8 @@ def parse_noise_spec(spec: str) -> tuple[str, dict[str, Any]]:
         settings[key] = int(value)
     if name in ("kinect_v2", "tof") and settings["supersample"] not in (1, 3, 5):
         raise ValueError(f"{name} supersample must be 1 (off), 3 or 5; got {settings['supersample']}")
+    if name == "kinect_v1":
+        check_int(settings["window"], "kinect_v1 window", minimum=1, maximum=63)
     if name == "realsense_d4xx":
         _check_realsense(settings)
     if name == "tof":
@@ -202,9 +208,46 @@ def _kinect_v2_axial(z, theta):
     return 1e-3 * (1.5 - 0.5 * z + 0.3 * z ** 2 + 0.1 * z ** 1.5 * t)
 
 
+def _correlated_normal(rng: np.random.Generator, shape: tuple[int, int], *, window: int = 1,
+                       blur: float = 0.0) -> np.ndarray:
+    """Spatially correlated standard normal noise: every pixel ``N(0, 1)``, neighbours correlated.
+
+    White noise filtered with the separable kernel ``box(window) * gauss(blur)`` (a
+    ``window x window`` mean, the block-matching window of a stereo or structured-light sensor,
+    then a Gaussian of standard deviation ``blur`` px), scaled so that the variance is exactly 1
+    (so the models' ``noise_std`` is unchanged). Drawn with margins, so no pixel sees a border:
+    one draw of ``(H + m, W + m)`` normals, ``m = window - 1 + 2 ceil(3 blur)``. With
+    ``window = 1`` and ``blur = 0`` this is ``rng.standard_normal(shape)``. Separable, one
+    vectorised slice-add per tap (9 + 9 for the 9 x 9 box).
+
+    The correlation at lag ``k`` along a row of the box alone is ``max(0, 1 - k / window)``; of
+    the Gaussian alone ``exp(-k^2 / (4 blur^2))``.
+    """
+    h, w = shape
+    r = int(np.ceil(3.0 * blur)) if blur > 0 else 0
+    kern = np.ones(int(window))
+    if r:
+        t = np.arange(-r, r + 1, dtype=np.float64)
+        kern = np.convolve(kern, np.exp(-0.5 * (t / blur) ** 2))
+    kern = kern / np.sqrt(np.sum(kern ** 2))
+    n = kern.size
+    x = rng.standard_normal((h + n - 1, w + n - 1))
+    if n == 1:
+        return x
+    rows = kern[0] * x[:, :w]
+    for i in range(1, n):
+        rows += kern[i] * x[:, i:i + w]
+    out = kern[0] * rows[:h]
+    for i in range(1, n):
+        out += kern[i] * rows[i:i + h]
+    return out
+
+
 def kinect_v1_noise(depth: np.ndarray, normals: np.ndarray, K: Any, *, rng: np.random.Generator,
-                    focal: float = 580.0, baseline: float = 0.075, subpixel: float = 0.125) -> np.ndarray:
-    """Kinect v1 (structured light): lateral jitter, axial noise, disparity quantisation.
+                    focal: float = 580.0, baseline: float = 0.075, subpixel: float = 0.125,
+                    window: int = 9) -> np.ndarray:
+    """Kinect v1 (structured light): lateral jitter at edges, correlated axial noise, disparity
+    quantisation.
 
     Parameters
     ----------
@@ -217,32 +260,72 @@ def kinect_v1_noise(depth: np.ndarray, normals: np.ndarray, K: Any, *, rng: np.r
     rng : numpy.random.Generator, keyword-only
     focal, baseline, subpixel : float, keyword-only
         Disparity model: ``d = focal * baseline / z`` px, rounded to ``subpixel`` px.
+    window : int, keyword-only
+        Side (px) of the correlation window: the disparity noise is the mean of white noise
+        over a ``window x window`` box (the sensor's block matching), so neighbours share it
+        (:func:`_correlated_normal`); 9 (matched to real Kinect v1 frames, docs/synthetic.md
+        "Sensor models against real frames"); 1 = independent per pixel.
 
     Returns
     -------
     noisy : ndarray (H, W) float64, 0 where nothing is returned.
 
+    Notes
+    -----
+    1. Lateral noise: each pixel reads the depth at a position shifted by ``N(0, sigma_L)`` px in
+       u and v (nearest neighbour), ``sigma_L = 0.8 + 0.035 theta / (pi/2 - theta)``, where that
+       position lies across a depth edge (no surface on one side only, or a jump of more than
+       2 %): edges come out jagged; on a smooth surface the matching window absorbs the shift.
+    2. Axial noise in disparity: ``d' = f b / z + e sigma_z f b / z^2``, ``sigma_z`` of Nguyen et
+       al., ``e`` unit-variance noise correlated over the ``window`` box.
+    3. Quantisation after the noise: ``d'`` rounded to ``subpixel`` (1/8 px), ``z' = f b / d'``.
+       Depth comes in plateaus (exactly equal values, zero second differences) separated by
+       steps ``z^2 subpixel / (f b)`` (11.5 mm at 2 m, 46 mm at 4 m).
+
+    The residual standard deviation on a plane stays ``noise_std("kinect_v1", z, theta)``.
+
     References
     ----------
     Nguyen, Izadi, Lovell, 3DIMPVT 2012; Khoshelham, Elberink, Sensors 12(2), 2012.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from depthnormals.render import KINECT_V2
+    >>> z = 2.0 + 0.002 * np.arange(64)[None, :] + np.zeros((32, 1))   # a slanted plane at ~2 m
+    >>> n = np.broadcast_to([0.0, 0.0, -1.0], (32, 64, 3))
+    >>> out = kinect_v1_noise(z, n, KINECT_V2, rng=np.random.default_rng(0))
+    >>> d2 = out[:, :-2] - 2 * out[:, 1:-1] + out[:, 2:]
+    >>> bool(np.mean(d2 == 0) > 0.3)   # plateaus: a naive second-difference noise estimate reads 0
+    True
     """
+    check_int(window, "kinect_v1 window", minimum=1, maximum=63)
     z = np.asarray(depth, dtype=np.float64)
     h, w = z.shape
     theta = np.nan_to_num(incidence_angle(normals, K), nan=0.0)
     sl = 0.8 + 0.035 * theta / np.maximum(np.pi / 2 - theta, 1e-3)
     du = np.rint(rng.standard_normal((h, w)) * sl).astype(np.int64)
     dv = np.rint(rng.standard_normal((h, w)) * sl).astype(np.int64)
-    uu = np.clip(np.arange(w)[None, :] + du, 0, w - 1)
-    vv = np.clip(np.arange(h)[:, None] + dv, 0, h - 1)
+    u0 = np.arange(w)[None, :]
+    v0 = np.arange(h)[:, None]
+    uu = np.clip(u0 + du, 0, w - 1)
+    vv = np.clip(v0 + dv, 0, h - 1)
+    ok0 = _valid(z)
+    zs = z[vv, uu]
+    oks = _valid(zs)
+    across = (ok0 != oks) | (ok0 & oks & (np.abs(zs - z) > 0.02 * np.where(ok0, z, 1.0)))
+    uu = np.where(across, uu, u0)
+    vv = np.where(across, vv, v0)
     zs = z[vv, uu]
     ts = theta[vv, uu]
     ok = _valid(zs)
     zs = np.where(ok, zs, 1.0)
-    noisy = zs + rng.standard_normal((h, w)) * _kinect_v1_axial(zs, ts)
     fb = focal * baseline
-    disp = np.rint(fb / np.maximum(noisy, 1e-6) / subpixel) * subpixel
+    e = _correlated_normal(rng, (h, w), window=int(window))
+    noisy = fb / zs + e * (_kinect_v1_axial(zs, ts) * fb / zs ** 2)
+    disp = np.rint(noisy / subpixel) * subpixel
     with np.errstate(divide="ignore"):
-        out = np.where(disp > 0, fb / disp, 0.0)
+        out = np.where(disp > 0, fb / np.where(disp > 0, disp, 1.0), 0.0)
     return np.where(ok, out, 0.0)
 
 
@@ -364,6 +447,7 @@ def _check_realsense(st: dict[str, Any]) -> None:
     check_real(st["hole_range"], "realsense_d4xx hole_range", minimum=0.0, finite=False, hint="metres")
     check_real(st["hole_width"], "realsense_d4xx hole_width", minimum=1e-6, hint="metres")
     check_int(st["hole_blob"], "realsense_d4xx hole_blob", minimum=1, maximum=256)
+    check_int(st["window"], "realsense_d4xx window", minimum=1, maximum=63)
 
 
 def _shift(a: np.ndarray, dv: int, du: int, fill: float) -> np.ndarray:
@@ -435,7 +519,7 @@ def realsense_d4xx_noise(depth: np.ndarray, normals: np.ndarray, K: Any, *, rng:
                          quantum: float = 1.0 / 32.0, max_disparity: float = 126.0,
                          max_range: float = 10.0, fatten_px: int = 2, fatten_jump: float = 0.05,
                          hole_range: float = 6.0, hole_width: float = 0.6,
-                         hole_blob: int = 4) -> np.ndarray:
+                         hole_blob: int = 4, window: int = 5) -> np.ndarray:
     """Active stereo (Intel RealSense D4xx-like): disparity noise and quantisation, edge
     fattening, left-right occlusion holes, range limits and far / low-signal holes.
 
@@ -477,6 +561,10 @@ def realsense_d4xx_noise(depth: np.ndarray, normals: np.ndarray, K: Any, *, rng:
         irradiance, ``cos theta / z^2``).
     hole_blob : int, keyword-only
         Those holes come in ``hole_blob x hole_blob`` pixel blocks (one draw per block).
+    window : int, keyword-only
+        Side (px) of the matching window that correlates the disparity noise: ``N(0, subpixel)``
+        is the mean of white noise over a ``window x window`` box (:func:`_correlated_normal`),
+        5 (the window that fattens edges by ``fatten_px = 2``); 1 = independent per pixel.
 
     Returns
     -------
@@ -484,7 +572,8 @@ def realsense_d4xx_noise(depth: np.ndarray, normals: np.ndarray, K: Any, *, rng:
 
     Notes
     -----
-    ``d = focal |baseline| / z``; edge fattening on ``d``; ``d' = d + N(0, subpixel)`` rounded
+    ``d = focal |baseline| / z``; edge fattening on ``d``; ``d' = d + N(0, subpixel)`` (correlated
+    over the ``window`` box) rounded
     to ``quantum``; ``z' = focal |baseline| / d'``. So ``std(z') ~= z^2 / (focal |baseline|) *
     sqrt(subpixel^2 + quantum^2 / 12)``. Dropped (0): no surface, hidden from the second imager
     (:func:`stereo_occlusion`, from the clean geometry), ``d' > max_disparity``, ``z' >
@@ -517,7 +606,7 @@ def realsense_d4xx_noise(depth: np.ndarray, normals: np.ndarray, K: Any, *, rng:
     st = {"baseline": baseline, "focal": focal, "subpixel": subpixel, "quantum": quantum,
           "max_disparity": max_disparity, "max_range": max_range, "fatten_px": fatten_px,
           "fatten_jump": fatten_jump, "hole_range": hole_range, "hole_width": hole_width,
-          "hole_blob": hole_blob}
+          "hole_blob": hole_blob, "window": window}
     _check_realsense(st)
     z = np.asarray(depth, dtype=np.float64)
     if z.ndim != 2:
@@ -536,7 +625,7 @@ def realsense_d4xx_noise(depth: np.ndarray, normals: np.ndarray, K: Any, *, rng:
             edge |= (dn * grow < disp) | (dn == 0.0)
         fg = _max_filter(np.where(ok & edge, disp, 0.0), int(fatten_px))
         disp = np.where(ok & (fg > disp * grow), fg, disp)
-    noisy = disp + rng.standard_normal((h, w)) * subpixel
+    noisy = disp + _correlated_normal(rng, (h, w), window=int(window)) * subpixel
     if quantum > 0:
         noisy = np.rint(noisy / quantum) * quantum
     good = ok & ~hidden & (noisy > 0) & (noisy <= max_disparity)
@@ -568,6 +657,8 @@ def _check_tof(st: dict[str, Any]) -> None:
     check_real(st["min_range"], "tof min_range", minimum=0.0, hint="metres")
     check_real(st["rounding"], "tof rounding", minimum=0.0, hint="metres; 0 = off")
     check_real(st["flying_jump"], "tof flying_jump", minimum=0.0, hint="relative depth jump")
+    check_real(st["blur"], "tof blur", minimum=0.0, maximum=8.0,
+               hint="px, Gaussian std of the noise correlation; 0 = off")
 
 
 def _tof_amplitude(z: np.ndarray, theta: np.ndarray, albedo: float) -> np.ndarray:
@@ -611,7 +702,8 @@ def _mix_neighbours(z: np.ndarray, *, rng: np.random.Generator, jump: float) -> 
 def tof_noise(depth: np.ndarray, normals: np.ndarray, K: Any, *, rng: np.random.Generator,
               subsamples: np.ndarray | None = None, albedo: float = 0.5, sigma_ref: float = 0.017,
               ref_range: float = 3.86, ref_albedo: float = 0.15, cutoff: float = 1.0,
-              min_range: float = 0.5, rounding: float = 0.001, flying_jump: float = 0.02) -> np.ndarray:
+              min_range: float = 0.5, rounding: float = 0.001, flying_jump: float = 0.02,
+              blur: float = 0.5) -> np.ndarray:
     """Continuous-wave time of flight: flying pixels, amplitude-dependent noise, low-signal
     invalidation, range limit, rounding.
 
@@ -643,6 +735,11 @@ def tof_noise(depth: np.ndarray, normals: np.ndarray, K: Any, *, rng: np.random.
         Output step, metres (1 mm); 0 = off.
     flying_jump : float, keyword-only
         Relative jump that makes a mixed pixel (without ``subsamples``).
+    blur : float, keyword-only
+        Spatial correlation of the random error: unit-variance white noise blurred by a Gaussian
+        of this standard deviation, px (:func:`_correlated_normal`; 0.5: lag-1 correlation
+        ``exp(-1/4 / 0.5^2) = 0.37``), standing for the optics' and the depth engine's blur;
+        0 = independent per pixel.
 
     Returns
     -------
@@ -653,7 +750,8 @@ def tof_noise(depth: np.ndarray, normals: np.ndarray, K: Any, *, rng: np.random.
     Amplitude ``a = albedo cos(theta) / z^2``; random error ``sigma = sigma_ref sqrt(a_ref / a)``,
     ``a_ref = ref_albedo / ref_range^2``, i.e. ``sigma = sigma_ref (z / ref_range)
     sqrt(ref_albedo / (albedo cos theta))``: photon shot noise dominated, phase error ``~
-    1/sqrt(a)``. Multipath and systematic (wiggling) errors are not modelled.
+    1/sqrt(a)``, correlated between neighbours through ``blur``. Multipath and systematic
+    (wiggling) errors are not modelled.
 
     References
     ----------
@@ -679,7 +777,8 @@ def tof_noise(depth: np.ndarray, normals: np.ndarray, K: Any, *, rng: np.random.
     4.82
     """
     st = {"albedo": albedo, "sigma_ref": sigma_ref, "ref_range": ref_range, "ref_albedo": ref_albedo,
-          "cutoff": cutoff, "min_range": min_range, "rounding": rounding, "flying_jump": flying_jump}
+          "cutoff": cutoff, "min_range": min_range, "rounding": rounding, "flying_jump": flying_jump,
+          "blur": blur}
     _check_tof(st)
     cam = as_intrinsics(K)
     z = np.asarray(depth, dtype=np.float64)
@@ -692,7 +791,7 @@ def tof_noise(depth: np.ndarray, normals: np.ndarray, K: Any, *, rng: np.random.
     ok = _valid(z)
     theta = np.nan_to_num(incidence_angle(normals, cam), nan=0.0)
     zz = np.where(ok, z, 1.0)
-    noisy = zz + rng.standard_normal(z.shape) * _tof_sigma(zz, theta, st)
+    noisy = zz + _correlated_normal(rng, z.shape, blur=float(blur)) * _tof_sigma(zz, theta, st)
     if rounding > 0:
         noisy = np.rint(noisy / rounding) * rounding
     a_ref = ref_albedo / ref_range ** 2

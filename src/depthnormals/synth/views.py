@@ -134,8 +134,7 @@ def _apply_model(name: str, st: dict, r, scene: Scene, pose, cam, size, near, rn
     if name == "gaussian":
         return _noise.gaussian_noise(r.depth, cam, rng=rng, sigma=st["sigma"], sigma_px=st["sigma_px"])
     if name == "kinect_v1":
-        return _noise.kinect_v1_noise(r.depth, r.normals, cam, rng=rng, focal=st["focal"],
-                                      baseline=st["baseline"], subpixel=st["subpixel"])
+        return _noise.kinect_v1_noise(r.depth, r.normals, cam, rng=rng, **st)
     if name == "realsense_d4xx":
         return _noise.realsense_d4xx_noise(r.depth, r.normals, cam, rng=rng, **st)
     sub = _subsamples(st["supersample"], r, scene, pose, cam, size, near, subs)
