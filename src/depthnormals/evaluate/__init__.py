@@ -6,6 +6,9 @@ of its settings; an interrupted run resumes. :func:`plan_evaluation` checks its 
 into an :class:`EvaluationPlan` without running anything. The pieces are public too: :class:`Protocol`
 (which pixels count and how), :func:`score_frame`, :func:`discontinuity_mask`,
 :func:`summarize`, :func:`discontinuity_share` (how much of a frame lies near an edge).
+Real sensor frames without ground truth are scored on their large planes:
+:func:`plane_reference` finds them, :func:`score_planes` scores an estimate on their interiors
+and rims.
 
 Matplotlib is imported only when figures are drawn.
 """
@@ -14,6 +17,7 @@ from __future__ import annotations
 
 from ._env import machine_description
 from ._methods import MethodSpec, parse_method_spec, resolve_methods
+from ._planes import PlaneInfo, PlaneReference, plane_reference, score_planes
 from ._protocol import (
     HIST_BIN_DEG,
     INVALID_POLICIES,
@@ -44,6 +48,8 @@ __all__ = [
     "EvaluationResult",
     "FrameScore",
     "MethodSpec",
+    "PlaneInfo",
+    "PlaneReference",
     "Protocol",
     "SceneShare",
     "discontinuity_mask",
@@ -52,11 +58,13 @@ __all__ = [
     "machine_description",
     "parse_method_spec",
     "plan_evaluation",
+    "plane_reference",
     "pooled_median",
     "read_results_csv",
     "resolve_methods",
     "run_evaluation",
     "score_frame",
+    "score_planes",
     "scoring_mask",
     "summarize",
     "summary_markdown",

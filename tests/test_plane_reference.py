@@ -1,0 +1,257 @@
+"""The plane reference (``depthnormals.evaluate.plane_reference`` / ``score_planes``): planes
+recovered on analytic scenes (exact, noisy, quantised like a Kinect v1), interior and rim
+masks on a square, scores on a constructed case, the compiled region kernels against NumPy
+references, and at least two planes on every real sensor frame of ``../shared``."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from depthnormals.analytic import make_scene, tilted_plane
+from depthnormals.evaluate import PlaneReference, plane_reference, score_planes
+from depthnormals.evaluate._planes_kernels import chessboard_inside, label_8connected
+from depthnormals.metrics import angular_error
+
+# Kinect v1 disparity: f * baseline ~ 580 px * 0.075 m, quantised to 1/8 px
+KINECT_FB = 580.0 * 0.075
+
+
+def _kinect(depth: np.ndarray, seed: int, sigma_z2: float = 0.0012) -> np.ndarray:
+    """Gaussian noise ``sigma_z2 * z^2`` on depth, then 1/8 px disparity quantisation."""
+    rng = np.random.default_rng(seed)
+    z = depth + rng.normal(0.0, 1.0, depth.shape) * sigma_z2 * depth**2
+    with np.errstate(divide="ignore"):
+        disp = np.round(8.0 * KINECT_FB / z) / 8.0
+        out = np.where(depth > 0, KINECT_FB / disp, 0.0)
+    return out
+
+
+def _plane_errors(ref: PlaneReference, truth: np.ndarray) -> list[float]:
+    """Angle (deg) between each reference plane and the median truth normal of its interior."""
+    out = []
+    for k in range(ref.n_planes):
+        g = truth[(ref.labels == k) & ref.interior]
+        med = np.median(g, axis=0)
+        out.append(float(angular_error(ref.normals[k][None, None], med[None, None])[0, 0]))
+    return out
+
+
+def test_exact_box_on_floor():
+    r = make_scene("box-on-floor").render()
+    ref = plane_reference(r.depth, r.K)
+    assert ref.n_planes >= 4  # floor, wall, two box faces
+    # the box faces keep a 1-2 px band of the unextracted top face at their crease (inside the
+    # 1 cm threshold): their fits tilt by a few hundredths of a degree
+    assert max(_plane_errors(ref, r.normals)) < 0.1
+    s = score_planes(r.normals, ref)
+    assert s["interior_mean"] < 0.05
+    assert s["coverage"] == 1.0
+    # normals face the camera and the offsets put the points on the planes
+    for k in range(2):  # the floor and the wall: exact
+        v, u = np.nonzero(ref.labels == k)
+        z = r.depth[v, u]
+        X = np.stack([(u - r.K.cx) * z / r.K.fx, (v - r.K.cy) * z / r.K.fy, z], 1)
+        assert np.all(X @ ref.normals[k] < 0)
+        assert np.median(np.abs(X @ ref.normals[k] + ref.offsets[k])) < 1e-6
+
+
+def test_sphere_is_not_a_plane():
+    r = make_scene("demo-room").render()
+    ref = plane_reference(r.depth, r.K)
+    sphere = ~r.planar & (r.depth > 0)
+    assert ((ref.labels >= 0) & sphere).sum() < 0.01 * sphere.sum()
+
+
+@pytest.mark.parametrize("scene", ["box-on-floor", "demo-room"])
+def test_noisy_quantised_planes(scene):
+    r = make_scene(scene).render()
+    z = _kinect(r.depth, seed=3)
+    # the staircase is there: steps of >= 1 cm at 2 m and beyond
+    ref = plane_reference(z, r.K, seed=1)
+    assert ref.n_planes >= 3
+    errs = _plane_errors(ref, r.normals)
+    big = [e for e, p in zip(errs, ref.planes, strict=True) if p.n_interior > 20000]
+    assert len(big) >= 2 and max(big) < 0.5, errs
+    assert max(errs) < 2.0, errs
+
+
+def test_tilted_plane_staircase():
+    n = np.array([0.3, -0.4, -1.0]) / np.linalg.norm([0.3, -0.4, -1.0])
+    r = tilted_plane(tuple(n), 3.0).render()
+    z = _kinect(r.depth, seed=0, sigma_z2=0.0)
+    steps = np.unique(np.round(z[240, 300:340], 6))
+    assert np.diff(steps).min() > 0.01  # the disparity steps exceed 1 cm here
+    ref = plane_reference(z, r.K)
+    assert ref.n_planes == 1
+    assert _plane_errors(ref, r.normals)[0] < 0.2
+    assert ref.planes[0].n_pixels > 0.95 * 480 * 640
+
+
+def test_deterministic_for_a_seed():
+    r = make_scene("box-on-floor").render()
+    z = _kinect(r.depth, seed=5)
+    a = plane_reference(z, r.K, seed=7)
+    b = plane_reference(z, r.K, seed=7)
+    assert np.array_equal(a.labels, b.labels)
+    assert np.array_equal(a.normals, b.normals)
+
+
+def _square():
+    depth = np.zeros((60, 80))
+    depth[10:40, 20:50] = 2.0  # a fronto-parallel square, nothing around it
+    return depth, (100.0, 100.0, 39.5, 29.5)
+
+
+def test_square_interior_and_rim():
+    depth, K = _square()
+    ref = plane_reference(depth, K, min_fraction=0.05)
+    assert ref.n_planes == 1
+    assert np.allclose(ref.normals[0], [0, 0, -1]) and np.isclose(ref.offsets[0], 2.0)
+    square = depth > 0
+    assert np.array_equal(ref.labels >= 0, square)
+    interior = np.zeros_like(square)
+    interior[14:36, 24:46] = True  # >= 5 px inside: 4 px rim on each side
+    assert np.array_equal(ref.interior, interior)
+    assert np.array_equal(ref.rim, square & ~interior)
+    assert ref.distance[10, 20] == 1 and ref.distance[14, 30] == 5 and ref.distance[0, 0] == 0
+    assert ref.planes[0].n_interior == 22 * 22 and ref.planes[0].n_rim == 900 - 484
+
+
+def test_score_exact_numbers():
+    depth, K = _square()
+    ref = plane_reference(depth, K, min_fraction=0.05)
+    est = np.zeros((60, 80, 3))
+    est[..., 2] = -1.0
+    t = np.radians(10.0)
+    est[14:25, 24:46] = [np.sin(t), 0.0, -np.cos(t)]  # half the interior (11 of 22 rows) off by 10 deg
+    est[10, 21:50] = np.nan  # the top rim row but its first pixel (29 px) missing
+    est[10:40, 20] = [0.0, 0.0, 1.0]  # the left rim column (30 px) facing away: 180 deg
+    s = score_planes(est, ref)
+    assert s["n_interior"] == 484 and s["n_rim"] == 416
+    assert s["interior_mean"] == pytest.approx(5.0, abs=1e-9)
+    assert s["interior_median"] == pytest.approx(5.0, abs=1e-9)  # 242 zeros and 242 tens
+    assert s["scored_rim"] == 416 - 29
+    assert s["rim_mean"] == pytest.approx(30 * 180.0 / 387, abs=1e-9)
+    assert s["rim_median"] == 0.0
+    assert s["coverage"] == pytest.approx((484 + 387) / 900)
+    assert s["rim_coverage"] == pytest.approx(387 / 416)
+    assert s["interior_coverage"] == 1.0
+    folded = score_planes(est, ref, folded=True)
+    assert folded["rim_mean"] == 0.0
+    assert len(s["planes"]) == 1 and s["planes"][0]["interior_mean"] == s["interior_mean"]
+
+
+def test_no_plane_and_bad_input():
+    ref = plane_reference(np.zeros((30, 40)), (30.0, 30.0, 19.5, 14.5))
+    assert ref.n_planes == 0 and (ref.labels == -1).all()
+    s = score_planes(np.zeros((30, 40, 3)), ref)
+    assert np.isnan(s["interior_mean"]) and np.isnan(s["coverage"]) and s["n_interior"] == 0
+    with pytest.raises(TypeError, match="threshold"):
+        plane_reference(np.ones((30, 40)), (30.0, 30.0, 19.5, 14.5), threshold=0.01)
+    with pytest.raises(TypeError, match="depth_scale"):
+        plane_reference(np.ones((30, 40), np.uint16), (30.0, 30.0, 19.5, 14.5))
+    with pytest.raises(TypeError, match="PlaneReference"):
+        score_planes(np.zeros((30, 40, 3)), {"labels": None})
+    with pytest.raises(ValueError):
+        score_planes(np.zeros((31, 40, 3)), ref)
+
+
+# --- the compiled kernels against short NumPy / Python references -------------------------
+
+def _components_reference(mask: np.ndarray) -> list[set]:
+    """8-connected components as sets of pixels (plain Python flood fill)."""
+    seen = np.zeros_like(mask)
+    comps = []
+    h, w = mask.shape
+    for v0, u0 in zip(*np.nonzero(mask), strict=False):
+        if seen[v0, u0]:
+            continue
+        stack, comp = [(v0, u0)], set()
+        seen[v0, u0] = True
+        while stack:
+            v, u = stack.pop()
+            comp.add((v, u))
+            for dv in (-1, 0, 1):
+                for du in (-1, 0, 1):
+                    vv, uu = v + dv, u + du
+                    if 0 <= vv < h and 0 <= uu < w and mask[vv, uu] and not seen[vv, uu]:
+                        seen[vv, uu] = True
+                        stack.append((vv, uu))
+        comps.append(comp)
+    return comps
+
+
+def _chessboard_reference(labels: np.ndarray) -> np.ndarray:
+    """Brute force: the smallest max(|dv|, |du|) to a pixel of another label, the ring of
+    pixels around the image counting as outside."""
+    pad = np.pad(labels, 1, constant_values=-2)
+    v, u = np.mgrid[-1:labels.shape[0] + 1, -1:labels.shape[1] + 1]
+    out = np.zeros(labels.shape, np.int32)
+    for (pv, pu), lab in np.ndenumerate(labels):
+        if lab >= 0:
+            other = pad != lab
+            out[pv, pu] = np.maximum(np.abs(v[other] - pv), np.abs(u[other] - pu)).min()
+    return out
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_label_kernel_matches_reference(seed):
+    rng = np.random.default_rng(seed)
+    mask = rng.random((23, 31)) < 0.45
+    labels = np.empty(mask.shape, np.int32)
+    sizes = label_8connected(mask, labels)
+    ref = _components_reference(mask)
+    assert len(sizes) == len(ref)
+    got = [set(zip(*np.nonzero(labels == k), strict=False)) for k in range(len(sizes))]
+    assert sorted(map(sorted, got)) == sorted(map(sorted, ref))
+    assert [len(g) for g in got] == sizes.tolist()
+    assert (labels[~mask] == -1).all()
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_chessboard_kernel_matches_reference(seed):
+    rng = np.random.default_rng(seed)
+    labels = np.full((40, 50), -1, np.int32)
+    for k in range(4):
+        v, u = rng.integers(0, 30, 2)
+        labels[v:v + rng.integers(5, 20), u:u + rng.integers(5, 25)] = k
+    labels[rng.random(labels.shape) < 0.02] = -1
+    dist = np.empty(labels.shape, np.int32)
+    chessboard_inside(labels, dist)
+    assert np.array_equal(dist, _chessboard_reference(labels))
+
+
+# --- the real sensor frames ---------------------------------------------------------------
+
+def _real_frames(shared_data):
+    root = shared_data / "real-sensors"
+    if not root.is_dir():
+        pytest.skip(f"{root} is absent")
+    from depthnormals._png import read_png
+
+    out = []
+    for folder in sorted(p for p in root.iterdir() if p.is_dir()):
+        info = json.loads((folder / "intrinsics.json").read_text())
+        K = (info["fx"], info["fy"], info["cx"], info["cy"])
+        for f in sorted(folder.glob("**/*depth*.png")):
+            if "derived" in f.name:
+                continue
+            raw = read_png(f)
+            if "sun" in folder.name:
+                raw = ((raw >> 3) | (raw << 13)).astype(np.uint16)
+            z = raw.astype(np.float64) * info["depth_scale"]
+            z[raw == 65535] = 0.0
+            out.append((f"{folder.name}/{f.name}", z, K))
+    return out
+
+
+def test_real_frames_have_planes(shared_data):
+    frames = _real_frames(shared_data)
+    assert frames
+    for name, z, K in frames:
+        ref = plane_reference(z, K)
+        assert ref.n_planes >= 2, name
+        assert ref.interior.sum() > 0.05 * z.size, name
