@@ -20,6 +20,9 @@ each noise model of :mod:`depthnormals.synth.noise` (``kinect_v1``, ``kinect_v2`
   to ``1/z`` on non-overlapping 31 x 31 windows (all pixels valid, no jump above 5 %, residual
   RMS under 1 % of the depth: the large planes of the frame), averaged over rows and columns
   and over windows.
+- ``est. noise``: :func:`depthnormals.estimate_noise` (robust second differences of ``1/z``, in
+  pixel footprints ``z / f``), median over the frames, and how many frames read exactly 0:
+  the failure mode of quantised depth, whose plateaus have zero second differences.
 
 The simulated views are rendered at 640 x 480 with the PrimeSense default intrinsics (fx = fy
 = 525, the TUM frames' camera) from indoor scenes of the ``mixed`` set; every model is applied
@@ -69,27 +72,29 @@ def _intrinsics(folder: Path) -> tuple[Intrinsics, float]:
     return Intrinsics(meta["fx"], meta["fy"], meta["cx"], meta["cy"]), float(meta["depth_scale"])
 
 
-def real_frames(root: Path = REAL) -> list[tuple[str, str, np.ndarray]]:
-    """``(family, frame, depth in metres with 0 = invalid)`` of every real frame."""
+def real_frames(root: Path = REAL) -> list[tuple[str, str, np.ndarray, Intrinsics]]:
+    """``(family, frame, depth in metres with 0 = invalid, K)`` of every real frame."""
     out = []
 
     def plain(folder, pattern, family):
-        _, scale = _intrinsics(root / folder)
+        K, scale = _intrinsics(root / folder)
         for p in sorted((root / folder).glob(pattern)):
             raw = read_png(p) if p.suffix == ".png" else _pgm16(p, ">")
             z = raw.astype(np.float64) * scale
             z[raw == 65535] = 0.0
-            out.append((family, f"{folder}/{p.name}", z))
+            out.append((family, f"{folder}/{p.name}", z, K))
 
     plain("tum_fr2_kinect1_slambook", "depth/*.png", "Kinect v1 TUM")
     plain("tum_kinect1_open3d", "TUM_depth.png", "Kinect v1 TUM")
     raw = _pgm16(root / "nyu_raw_kinect1_open3d" / "NYU_depth.pgm", "<").astype(np.float64)
     z = np.where(raw < 2047, 351.3 / np.maximum(1092.5 - raw, 1e-9), 0.0)
-    out.append(("Kinect v1 NYU raw", "nyu_raw_kinect1_open3d/NYU_depth.pgm", np.where(z < 10, z, 0.0)))
+    out.append(("Kinect v1 NYU raw", "nyu_raw_kinect1_open3d/NYU_depth.pgm", np.where(z < 10, z, 0.0),
+                _intrinsics(root / "nyu_raw_kinect1_open3d")[0]))
     plain("nyu_registered_kinect1_slambook", "depth/*.pgm", "Kinect v1 NYU registered")
     v = read_png(root / "sunrgbd_open3d" / "SUN_depth.png").astype(np.uint16)
     mm = (v >> 3) | (v << 13)
-    out.append(("SUN RGB-D Xtion", "sunrgbd_open3d/SUN_depth.png", mm.astype(np.float64) * 1e-3))
+    out.append(("SUN RGB-D Xtion", "sunrgbd_open3d/SUN_depth.png", mm.astype(np.float64) * 1e-3,
+                _intrinsics(root / "sunrgbd_open3d")[0]))
     plain("kitti_road_lidar_sne_roadseg", "depth_u16.png", "KITTI LiDAR (densified)")
     return out
 
@@ -170,12 +175,15 @@ def residual_autocorrelation(z: np.ndarray, *, tile: int = TILE, max_rel_rms: fl
     return np.asarray(out, dtype=np.float64).reshape(-1, len(LAGS))
 
 
-def frame_stats(frames: list[np.ndarray]) -> dict:
-    """The pooled statistics of a list of depth maps (metres, 0 = invalid)."""
+def frame_stats(frames: list[np.ndarray], Ks: list[Intrinsics]) -> dict:
+    """The pooled statistics of a list of depth maps (metres, 0 = invalid) and cameras."""
+    from depthnormals import estimate_noise
+
     zero = total = 0
-    widths, steps, zs, acs = [], [], [], []
-    for z in frames:
+    widths, steps, zs, acs, est = [], [], [], [], []
+    for z, K in zip(frames, Ks, strict=True):
         z = np.where(np.isfinite(z) & (z > 0), z, 0.0).astype(np.float64)
+        est.append(float(estimate_noise(z, K)))
         a, b = second_differences(z)
         zero, total = zero + a, total + b
         wd, st, zm = plateaus(z)
@@ -205,6 +213,9 @@ def frame_stats(frames: list[np.ndarray]) -> dict:
         "autocorr": ({str(k): float(a) for k, a in zip(LAGS, ac.mean(axis=0), strict=True)}
                      if len(ac) else None),
         "windows": len(ac),
+        "estimate_noise": est,
+        "estimate_noise_median": float(np.median(est)),
+        "estimate_noise_zero": sum(e == 0 for e in est),
     }
 
 
@@ -255,7 +266,7 @@ def _fmt(x, spec):
 def table(rows: list[tuple[str, dict]]) -> str:
     head = (f"{'depth source':34s} {'n':>2s} {'zero d2':>8s} {'run med':>7s} {'mean':>5s} "
             f"{'step 2m':>7s} {'4m':>5s} {'c':>5s} " + " ".join(f"{'ac' + str(k):>5s}" for k in SHOWN_LAGS)
-            + f" {'win':>4s}")
+            + f" {'win':>4s} {'est. noise':>12s}")
     lines = [head, "-" * len(head)]
     for name, s in rows:
         ac = s["autocorr"] or {}
@@ -265,7 +276,8 @@ def table(rows: list[tuple[str, dict]]) -> str:
             f"{_fmt(s['run_median'], '7.0f')} {_fmt(s['run_mean'], '5.1f')} "
             f"{_fmt(s['step_2m_mm'], '7.1f')} {_fmt(s['step_4m_mm'], '5.1f')} "
             f"{_fmt(s['step_c_mm_per_m2'], '5.2f')} "
-            + " ".join(_fmt(ac.get(str(k)), '5.2f') for k in SHOWN_LAGS) + f" {s['windows']:4d}")
+            + " ".join(_fmt(ac.get(str(k)), '5.2f') for k in SHOWN_LAGS) + f" {s['windows']:4d}"
+            + f" {s['estimate_noise_median']:5.3f} ({s['estimate_noise_zero']}/{s['frames']} 0)")
     return "\n".join(lines)
 
 
@@ -282,15 +294,16 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     if args.real.is_dir():
         families: dict[str, list] = {}
-        for family, _, z in real_frames(args.real):
-            families.setdefault(family, []).append(z)
-        rows += [(f"real: {k}", frame_stats(v)) for k, v in families.items()]
+        for family, _, z, K in real_frames(args.real):
+            families.setdefault(family, []).append((z, K))
+        rows += [(f"real: {k}", frame_stats(*zip(*v, strict=True))) for k, v in families.items()]
     else:
         print(f"no real frames at {args.real}; simulated only", file=sys.stderr)
     renders = simulated_views(tuple(s for s in args.scenes.split(",") if s), args.views, args.seed)
-    rows.append(("sim: clean", frame_stats([r.depth for _, _, r in renders])))
+    cams = [PRIMESENSE] * len(renders)
+    rows.append(("sim: clean", frame_stats([r.depth for _, _, r in renders], cams)))
     for m in (m for m in args.models.split(",") if m):
-        rows.append((f"sim: {m}", frame_stats(simulate(m, renders, args.seed))))
+        rows.append((f"sim: {m}", frame_stats(simulate(m, renders, args.seed), cams)))
     print(table(rows))
     print(f"({len(renders)} simulated views, 640 x 480, fx = 525; {time.perf_counter() - t0:.0f} s)")
     if args.json:
