@@ -5,8 +5,6 @@ references, and at least two planes on every real sensor frame of ``../shared``.
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 
@@ -226,32 +224,18 @@ def test_chessboard_kernel_matches_reference(seed):
 
 # --- the real sensor frames ---------------------------------------------------------------
 
-def _real_frames(shared_data):
+def test_real_frames_have_planes(shared_data):
     root = shared_data / "real-sensors"
     if not root.is_dir():
         pytest.skip(f"{root} is absent")
-    from depthnormals._png import read_png
+    from depthnormals.datasets import open as open_dataset
+    from depthnormals.evaluate import sensor_threshold
 
-    out = []
-    for folder in sorted(p for p in root.iterdir() if p.is_dir()):
-        info = json.loads((folder / "intrinsics.json").read_text())
-        K = (info["fx"], info["fy"], info["cx"], info["cy"])
-        for f in sorted(folder.glob("**/*depth*.png")):
-            if "derived" in f.name:
-                continue
-            raw = read_png(f)
-            if "sun" in folder.name:
-                raw = ((raw >> 3) | (raw << 13)).astype(np.uint16)
-            z = raw.astype(np.float64) * info["depth_scale"]
-            z[raw == 65535] = 0.0
-            out.append((f"{folder.name}/{f.name}", z, K))
-    return out
-
-
-def test_real_frames_have_planes(shared_data):
-    frames = _real_frames(shared_data)
-    assert frames
-    for name, z, K in frames:
-        ref = plane_reference(z, K)
-        assert ref.n_planes >= 2, name
-        assert ref.interior.sum() > 0.05 * z.size, name
+    n = 0
+    for f in open_dataset(root):
+        ref = plane_reference(f.depth, f.K, threshold=sensor_threshold(f.meta))
+        assert ref.n_planes >= 2, (f.group, f.name)
+        assert ref.interior.sum() > 0.05 * f.depth.size, (f.group, f.name)
+        assert all(p.rms_ratio <= 0.45 for p in ref.planes)
+        n += 1
+    assert n == 11

@@ -10,6 +10,7 @@ from ._frame import Frame
 from .hypersim import is_hypersim, read_hypersim
 from .kitti import is_kitti, read_kitti
 from .nyu import is_nyu, read_nyu
+from .realsensors import is_realsensors, read_realsensors
 from .replica import REPLICA_INTRINSICS, is_replica, read_replica
 from .scannet import is_scannet, read_scannet
 from .ssn import is_ssn, read_ssn
@@ -28,6 +29,7 @@ __all__ = [
     "read_hypersim",
     "read_kitti",
     "read_nyu",
+    "read_realsensors",
     "read_replica",
     "read_scannet",
     "read_ssn",
@@ -46,6 +48,7 @@ _READERS: dict[str, tuple[Any, Any, tuple[str, ...]]] = {
     "nyu": (is_nyu, read_nyu, ("intrinsics",)),
     "hypersim": (is_hypersim, read_hypersim, ()),
     "replica": (is_replica, read_replica, ("intrinsics", "depth_scale")),
+    "realsensors": (is_realsensors, read_realsensors, ("intrinsics", "depth_scale")),
 }
 #: The format names :func:`open` accepts as ``format=``, in detection order.
 FORMATS = tuple(_READERS)
@@ -109,7 +112,8 @@ def detect_format(path: str | Path) -> str:
         "ScanNet export (depth/*.png + intrinsic/intrinsic_depth.txt), KITTI depth (proj_depth/ "
         "or groundtruth_depth/ + intrinsics/), NYU Depth v2 labeled .mat (HDF5 with 'depths'), "
         "Hypersim (*_geometry_hdf5/frame.IIII.depth_meters.hdf5), Replica renders as NICE-SLAM "
-        "publishes them (results/depth*.png); pass format= to force one"
+        "publishes them (results/depth*.png), real sensor folders (intrinsics.json + depth "
+        "images, or a folder of them); pass format= to force one"
     )
 
 
@@ -125,10 +129,11 @@ def open(path: str | Path, *, format: str | None = None, intrinsics: Any = None,
         One of :data:`FORMATS`; default: detected from the layout.
     intrinsics : str, Intrinsics, (fx, fy, cx, cy), 3x3 array or path, optional
         Camera (or preset name, e.g. ``"fr1"`` for TUM) for the formats that take one (TUM,
-        ScanNet, KITTI, NYU, Replica); an error for the others, whose files carry their camera.
+        ScanNet, KITTI, NYU, Replica, real sensor folders); an error for the others, whose
+        files carry their camera.
     depth_scale : float, optional
-        Metres per PNG unit for TUM, ScanNet, KITTI and Replica (defaults: 1/5000, 1/1000,
-        1/256, 1/6553.5).
+        Metres per PNG unit for TUM, ScanNet, KITTI, Replica and real sensor folders
+        (defaults: 1/5000, 1/1000, 1/256, 1/6553.5, ``intrinsics.json``).
 
     Each format's own reader (``read_tum``, ``read_kitti``, ...) takes further options.
     Recognised, in this order:
@@ -143,7 +148,9 @@ def open(path: str | Path, *, format: str | None = None, intrinsics: Any = None,
     - TUM RGB-D, ScanNet export, KITTI depth, NYU Depth v2 labeled ``.mat``, Hypersim and
       Replica renders (NICE-SLAM layout):
       see docs/datasets.md and each reader. Their frames carry ``normals=None`` when the
-      dataset has no ground-truth normals (all but Hypersim).
+      dataset has no ground-truth normals (all but Hypersim);
+    - last, a real sensor folder (``intrinsics.json`` + depth images at the top or in
+      ``depth/``, or a folder of them: :func:`read_realsensors`), groups the folder names.
 
     Raises
     ------

@@ -17,7 +17,13 @@ from __future__ import annotations
 
 from ._env import machine_description
 from ._methods import MethodSpec, parse_method_spec, resolve_methods
-from ._planes import PlaneInfo, PlaneReference, plane_reference, score_planes
+from ._planes import (
+    PlaneInfo,
+    PlaneReference,
+    plane_reference,
+    score_planes,
+    sensor_threshold,
+)
 from ._protocol import (
     HIST_BIN_DEG,
     INVALID_POLICIES,
@@ -66,6 +72,7 @@ __all__ = [
     "score_frame",
     "score_planes",
     "scoring_mask",
+    "sensor_threshold",
     "summarize",
     "summary_markdown",
     "synth_discontinuity_shares",

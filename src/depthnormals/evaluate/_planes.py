@@ -23,7 +23,7 @@ from ..camera import backproject
 from ..metrics import angular_error
 from ._planes_kernels import chessboard_inside, label_8connected
 
-__all__ = ["PlaneInfo", "PlaneReference", "plane_reference", "score_planes"]
+__all__ = ["PlaneInfo", "PlaneReference", "plane_reference", "score_planes", "sensor_threshold"]
 
 #: Inlier threshold ``max(THRESHOLD_FLOOR_M, THRESHOLD_Z2_PER_M * z^2)`` in metres (point to
 #: plane distance). Kinect v1 quantises disparity to 1/8 px; with f ~ 580 px and baseline
@@ -38,6 +38,11 @@ THRESHOLD_Z2_PER_M = 0.005
 #: this. Points spread uniformly across the band give 1/sqrt(3) = 0.58 (a curved surface
 #: filling the band); a Kinect staircase gives about 0.15, its noise 0.3 - 0.4.
 MAX_RMS_RATIO = 0.45
+#: The threshold for LiDAR depth, whose noise does not grow with z^2: 5 cm everywhere, 2.5
+#: times the 2 cm range accuracy of a Velodyne HDL-64E (the densified KITTI frames add
+#: interpolation between scan lines). :func:`sensor_threshold` picks it for a sensor text
+#: that mentions LiDAR.
+LIDAR_THRESHOLD = (0.05, 0.0)
 #: A plane is kept when the quadratic trend of its ``residual / threshold`` (a least-squares
 #: quadric in the plane's own coordinates) has an RMS of at most MAX_BEND_RATIO and at most
 #: MAX_BEND_SHARE of the residual RMS (the second test only where that RMS exceeds 0.05).
@@ -133,6 +138,27 @@ class PlaneReference:
         on = self.labels >= 0
         out[on] = self.normals[self.labels[on]]
         return out
+
+
+def sensor_threshold(meta: dict) -> tuple[float, float]:
+    """The ``threshold`` of :func:`plane_reference` for a frame, from its ``meta``.
+
+    ``meta["plane_threshold"]`` when given (a real sensor folder's ``intrinsics.json`` may
+    carry it), :data:`LIDAR_THRESHOLD` when ``meta["sensor"]`` mentions LiDAR, else the
+    structured-light default ``(THRESHOLD_FLOOR_M, THRESHOLD_Z2_PER_M)``.
+
+    Examples
+    --------
+    >>> sensor_threshold({"sensor": "Velodyne HDL-64E LiDAR"}), sensor_threshold({})
+    ((0.05, 0.0), (0.01, 0.005))
+    """
+    given = meta.get("plane_threshold")
+    if given is not None:
+        a, b = (float(t) for t in given)
+        return a, b
+    if "lidar" in str(meta.get("sensor", "")).lower():
+        return LIDAR_THRESHOLD
+    return THRESHOLD_FLOOR_M, THRESHOLD_Z2_PER_M
 
 
 def _threshold(z: np.ndarray, floor_m: float, z2_per_m: float) -> np.ndarray:
@@ -368,7 +394,8 @@ def plane_reference(depth: Any, K: Any, *, depth_scale: float | None = None, see
     Then each pixel within the sampling radius of a kept region and inside that plane's
     threshold goes to the plane it fits best (relative to the threshold), so a plane found
     first does not keep the foot of its neighbour; each plane keeps its largest connected part
-    and is refitted once more; regions below the minimum size are dropped.
+    and is refitted once more; planes whose region fell below the minimum size or fails the
+    residual tests now are dropped.
 
     Parameters
     ----------
@@ -415,18 +442,20 @@ def plane_reference(depth: Any, K: Any, *, depth_scale: float | None = None, see
     p = _check_params(threshold, min_fraction, max_rms_ratio, hypotheses, max_planes,
                       interior_px, valid.shape)
     seed = check_int(seed, "seed", minimum=0, maximum=2**63 - 1)
-    z = np.where(valid, pts[..., 2], np.inf)
-    thr = _threshold(z, p.floor_m, p.z2_per_m)
+    thr = _threshold(np.where(valid, pts[..., 2], 0.0), p.floor_m, p.z2_per_m)
     rng = np.random.default_rng(seed)
     found = _extract(pts, thr, valid, p, rng) if valid.sum() >= p.min_pixels else []
     labels = _reassign(pts, thr, valid, found, p) if found else np.full(valid.shape, -1, np.int32)
-    planes = []
+    planes, keep = [], []
     for k in range(len(found)):
         region = labels == k
-        if region.sum() >= p.min_pixels:
-            planes.append(_fit_plane(pts[region]))
+        if region.sum() < p.min_pixels:
+            continue
+        n, d = _fit_plane(pts[region])
+        if _flat(pts, thr, region, np.append(n, d), p):
+            planes.append((n, d))
+            keep.append(k)
     # relabel the survivors 0..P-1 in order
-    keep = [k for k in range(len(found)) if (labels == k).sum() >= p.min_pixels]
     remap = np.full(len(found) + 1, -1, np.int32)
     remap[keep] = np.arange(len(keep), dtype=np.int32)
     labels = remap[labels]
