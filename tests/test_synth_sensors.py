@@ -17,6 +17,9 @@ from depthnormals.render import render_mesh, render_subsamples
 from depthnormals.synth import generate
 from depthnormals.synth.noise import (
     MODELS,
+    _correlated_normal,
+    _correlation_kernel,
+    _separable_reference,
     discontinuity_mask,
     incidence_angle,
     kinect_v1_noise,
@@ -431,3 +434,25 @@ def test_correlation_settings_parsed_and_checked():
                         ("tof:blur=-1", "blur must be")):
         with pytest.raises(ValueError, match=match):
             parse_noise_spec(spec)
+
+
+@pytest.mark.parametrize(("window", "blur"), [(9, 0.0), (5, 0.0), (1, 0.5), (3, 1.2), (1, 0.0)])
+def test_correlated_noise_compiled_equals_reference(window, blur):
+    kern = _correlation_kernel(window, blur)
+    x = _rng(4).standard_normal((H + kern.size - 1, W + kern.size - 1))
+    got = _correlated_normal(_rng(4), (H, W), window=window, blur=blur)
+    want = x if kern.size == 1 else _separable_reference(x, kern)
+    assert np.array_equal(got, want)
+
+
+def test_correlated_noise_unit_variance_and_box_correlation():
+    e = _correlated_normal(_rng(5), (400, 400), window=9)
+    assert e.std() == pytest.approx(1.0, abs=0.05)
+    for k in (1, 4, 8, 9):  # a 9-px box: correlation 1 - k / 9 along rows and columns
+        ac = 0.5 * (np.mean(e[:, :-k] * e[:, k:]) + np.mean(e[:-k] * e[k:])) / e.var()
+        assert ac == pytest.approx(max(0.0, 1 - k / 9), abs=0.05), (k, ac)
+    g = _correlated_normal(_rng(5), (400, 400), blur=0.5)
+    ac = np.mean(g[:, :-1] * g[:, 1:]) / g.var()
+    kern = _correlation_kernel(1, 0.5)  # the sampled Gaussian: lag 1 = sum k_i k_i+1 = 0.26
+    assert g.std() == pytest.approx(1.0, abs=0.03)
+    assert ac == pytest.approx(np.sum(kern[:-1] * kern[1:]), abs=0.03) and ac > 0.2
