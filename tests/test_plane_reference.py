@@ -5,6 +5,8 @@ references, and at least two planes on every real sensor frame of ``../shared``.
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -239,3 +241,55 @@ def test_real_frames_have_planes(shared_data):
         assert all(p.rms_ratio <= 0.45 for p in ref.planes)
         n += 1
     assert n == 11
+
+
+# --- the front end: run_plane_evaluation and `depthnormals evaluate --reference planes` ----
+
+def _sensor_folder(tmp_path):
+    """A real-sensor-style folder: box-on-floor at 320 x 240 with Kinect v1 quantisation,
+    stored as a millimetre PNG beside an intrinsics.json, plus a colour image to skip."""
+    from depthnormals._png import encode_png
+
+    K = (262.5, 262.5, 159.5, 119.5)
+    r = make_scene("box-on-floor").render(K=K, shape=(240, 320))
+    mm = np.round(_kinect(r.depth, seed=2) * 1000.0).astype(np.uint16)
+    (tmp_path / "cam").mkdir()
+    (tmp_path / "cam" / "depth.png").write_bytes(encode_png(mm))
+    (tmp_path / "cam" / "rgb.png").write_bytes(encode_png(np.zeros((240, 320, 3), np.uint8)))
+    (tmp_path / "cam" / "intrinsics.json").write_text(json.dumps(
+        {"fx": K[0], "fy": K[1], "cx": K[2], "cy": K[3], "depth_scale": 0.001,
+         "invalid_value": 0, "sensor": "simulated Kinect v1"}))
+    return tmp_path / "cam", r
+
+
+def test_run_plane_evaluation(tmp_path):
+    from depthnormals.evaluate import run_plane_evaluation
+
+    folder, _ = _sensor_folder(tmp_path)
+    res = run_plane_evaluation(folder, "3f2n+,fals[window=11]", tmp_path / "out", figures=True)
+    assert len(res.frames) == 1 and res.frames[0]["group"] == "cam"
+    f = res.frames[0]
+    assert len(f["planes"]) >= 3 and set(f["scores"]) == {"3f2n+", "fals[window=11]"}
+    for label in ("3f2n+", "fals[window=11]"):
+        s = f["scores"][label]
+        assert 0.0 < s["interior_mean"] < 20.0 and s["coverage"] > 0.95 and s["ms"] > 0
+        assert res.summary["(all)"][label]["interior_mean"] == s["interior_mean"]
+    saved = json.loads((tmp_path / "out" / "planes.json").read_text())
+    assert saved["settings"]["reference"] == "planes" and saved["settings"]["seed"] == 0
+    assert saved["frames"][0]["planes"][0]["n_pixels"] == f["planes"][0]["n_pixels"]
+    assert "| cam | 3f2n+ |" in (tmp_path / "out" / "planes.md").read_text()
+    (png,) = res.figures
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_cli_reference_planes(tmp_path, capsys):
+    from depthnormals import cli
+
+    folder, _ = _sensor_folder(tmp_path)
+    rc = cli.main(["evaluate", str(folder), "-m", "3f2n", "-o", str(tmp_path / "o"),
+                   "--reference", "planes", "--figures", "0", "-q"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "| cam | 3f2n |" in text and "interior (deg)" in text
+    assert (tmp_path / "o" / "planes.json").is_file()
+    assert not (tmp_path / "o" / "figures").exists()

@@ -58,6 +58,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="estimate and score on Dask: local, local:N (N worker processes) or "
                              "tcp://host:port of a running `dask scheduler` (needs the dask extra)")
     parser.add_argument("--batch-size", type=int, default=8, help="frames per Dask task (default 8)")
+    parser.add_argument("--reference", choices=("gt", "planes"), default="gt",
+                        help="score against the ground-truth normals (default) or, for real "
+                             "sensor data without them, against the frame's large planes "
+                             "(planes.json, planes.md, one figure per frame; docs/evaluation.md)")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="seed of the plane reference's RANSAC (--reference planes)")
 
 
 def parse_method_options(items: list[str]) -> dict[str, dict]:
@@ -97,8 +103,25 @@ def figures_or_skip(requested: int, command: str = "evaluate") -> int:
     return requested
 
 
+def run_planes(args: argparse.Namespace) -> int:
+    """``--reference planes``: :func:`depthnormals.evaluate.run_plane_evaluation`."""
+    from ..evaluate import run_plane_evaluation
+
+    res = run_plane_evaluation(
+        args.dataset, args.methods, args.out, method_options=parse_method_options(args.option),
+        frames=args.frames, figures=figures_or_skip(args.figures) > 0, seed=args.seed,
+        threads=args.threads, progress=not args.quiet)
+    print(res.table.strip())
+    print(f"\n{len(res.frames)} frames -> {res.out_dir / 'planes.json'}, planes.md"
+          + (f", {len(res.figures)} figures" if res.figures else ""))
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     from ..evaluate import Protocol, run_evaluation, summary_markdown
+
+    if getattr(args, "reference", "gt") == "planes":
+        return run_planes(args)
 
     protocol = Protocol(folded=args.errors == "folded", border=args.border, invalid=args.invalid,
                         edge_radius=args.edge_radius, edge_angle=args.edge_angle,

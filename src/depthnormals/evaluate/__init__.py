@@ -8,7 +8,7 @@ into an :class:`EvaluationPlan` without running anything. The pieces are public 
 :func:`summarize`, :func:`discontinuity_share` (how much of a frame lies near an edge).
 Real sensor frames without ground truth are scored on their large planes:
 :func:`plane_reference` finds them, :func:`score_planes` scores an estimate on their interiors
-and rims.
+and rims, :func:`run_plane_evaluation` does both for every frame and method of a dataset.
 
 Matplotlib is imported only when figures are drawn.
 """
@@ -23,6 +23,12 @@ from ._planes import (
     plane_reference,
     score_planes,
     sensor_threshold,
+)
+from ._planes_run import (
+    PlaneEvaluationResult,
+    plane_summary,
+    plane_table_markdown,
+    run_plane_evaluation,
 )
 from ._protocol import (
     HIST_BIN_DEG,
@@ -54,6 +60,7 @@ __all__ = [
     "EvaluationResult",
     "FrameScore",
     "MethodSpec",
+    "PlaneEvaluationResult",
     "PlaneInfo",
     "PlaneReference",
     "Protocol",
@@ -65,10 +72,13 @@ __all__ = [
     "parse_method_spec",
     "plan_evaluation",
     "plane_reference",
+    "plane_summary",
+    "plane_table_markdown",
     "pooled_median",
     "read_results_csv",
     "resolve_methods",
     "run_evaluation",
+    "run_plane_evaluation",
     "score_frame",
     "score_planes",
     "scoring_mask",
