@@ -1,0 +1,232 @@
+"""Real sensor frames scored on their planes: our estimators beside OpenCV and Open3D.
+
+For every folder of ``../shared/data/real-sensors`` (Kinect v1, Xtion, densified LiDAR; no
+ground truth), each frame's plane reference (``depthnormals.evaluate.plane_reference``, the
+threshold from ``sensor_threshold``: Kinect z^2 model, 5 cm for LiDAR) scores every method on
+the plane interiors (>= 5 px inside) and rims (1-4 px inside): mean angular error (deg) and
+coverage. Prints one table per measure (methods x folders, and the mean over folders), then
+the single-thread time of ``3f2n+`` against OpenCV's FALS (window 7) per frame, the two
+interleaved in the same run (median of ``--repeats``; thread CPU time beside wall time, as
+in ``benchmarks/targets.py``: the shared VM moves wall-clock medians).
+
+Every estimate is turned to face the camera (``dot(n, X) < 0``), as ours are, so the peers'
+arbitrary signs do not count as errors; zero vectors count as missing.
+
+    python benchmarks/real_sensors.py [--methods 3f2n+,opencv-fals-7] [--json OUT]
+                                      [--repeats 5] [--root ../shared/data/real-sensors]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+import depthnormals as dn
+from depthnormals.camera import backproject
+from depthnormals.datasets import open as open_dataset
+from depthnormals.evaluate import plane_reference, score_planes, sensor_threshold
+
+ROOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "real-sensors"
+
+
+def _ours(method: str, **options) -> Callable:
+    return lambda depth, K: dn.estimate_normals(depth, K, method=method, **options)
+
+
+def _opencv_fals(window: int) -> Callable:
+    def run(depth, K):
+        import cv2
+
+        h, w = depth.shape
+        est = cv2.rgbd.RgbdNormals_create(h, w, cv2.CV_32F, np.asarray(K, np.float64), window,
+                                          cv2.rgbd.RgbdNormals_RGBD_NORMALS_METHOD_FALS)
+        return est.apply(cv2.rgbd.depthTo3d(np.ascontiguousarray(depth, np.float32), K))
+
+    return run
+
+
+def _open3d_normal_map(depth, K):
+    import open3d as o3d
+
+    image = o3d.t.geometry.Image(o3d.core.Tensor(np.ascontiguousarray(depth, np.float32)))
+    intr = o3d.core.Tensor(np.asarray(K, dtype=np.float64))
+    vmap = image.create_vertex_map(intr, invalid_fill=0.0)
+    return vmap.create_normal_map(invalid_fill=0.0).as_tensor().numpy()
+
+
+def _open3d_knn30(depth, K):
+    import open3d as o3d
+
+    pts = backproject(depth, K)
+    ok = np.isfinite(pts[..., 2])
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts[ok]))
+    cloud.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(knn=30))
+    cloud.orient_normals_towards_camera_location(np.zeros(3))
+    out = np.full(pts.shape, np.nan)
+    out[ok] = np.asarray(cloud.normals)
+    return out
+
+
+def _box_fit(depth, K):
+    from depthnormals.ddm.boxfit import box_fit_normals
+
+    return box_fit_normals(depth, K, radius=8)
+
+
+#: label -> (depth float32 metres, K 3x3) -> normals (H, W, 3)
+METHODS: dict[str, Callable] = {
+    "3f2n+": _ours("3f2n+"),
+    "opencv-fals-5": _opencv_fals(5),
+    "opencv-fals-7": _opencv_fals(7),
+    "fals-11": _ours("fals", window=11),
+    "pcl-average-3d-gradient": _ours("pcl-average-3d-gradient"),
+    "open3d-normal-map": _open3d_normal_map,
+    "open3d-knn30": _open3d_knn30,
+    "box-fit-8 (reference)": _box_fit,
+}
+
+
+def _facing(normals: np.ndarray, depth: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Normals (float64) turned to face the camera; zero-length or non-finite -> NaN."""
+    n = np.asarray(normals, np.float64)[..., :3].copy()
+    pts = backproject(depth, K)
+    bad = ~np.all(np.isfinite(n), axis=-1) | (np.linalg.norm(n, axis=-1) == 0)
+    with np.errstate(invalid="ignore"):
+        flip = np.einsum("...i,...i->...", n, pts) > 0
+    n[flip] *= -1.0
+    n[bad] = np.nan
+    return n
+
+
+def _measure(fns: list[Callable], repeats: int) -> list[tuple[float, float]]:
+    """(median thread-CPU ms, median wall ms) per callable, interleaved round-robin."""
+    for fn in fns:
+        fn()
+    cpu: list[list[float]] = [[] for _ in fns]
+    wall: list[list[float]] = [[] for _ in fns]
+    for _ in range(repeats):
+        for j, fn in enumerate(fns):
+            t0, c0 = time.perf_counter(), time.thread_time()
+            fn()
+            cpu[j].append(time.thread_time() - c0)
+            wall[j].append(time.perf_counter() - t0)
+    return [(1e3 * float(np.median(c)), 1e3 * float(np.median(t)))
+            for c, t in zip(cpu, wall, strict=True)]
+
+
+def accuracy(root: Path, labels: list[str], seed: int) -> dict:
+    """folder -> label -> mean over the folder's frames of interior / rim / coverage."""
+    per: dict[str, dict[str, list[dict]]] = {}
+    planes: dict[str, int] = {}
+    for frame in open_dataset(root):
+        ref = plane_reference(frame.depth, frame.K, seed=seed,
+                              threshold=sensor_threshold(frame.meta))
+        planes[frame.group] = planes.get(frame.group, 0) + ref.n_planes
+        depth = frame.depth.astype(np.float32)
+        for label in labels:
+            est = _facing(METHODS[label](depth, frame.K), depth, frame.K)
+            per.setdefault(frame.group, {}).setdefault(label, []).append(score_planes(est, ref))
+    out: dict = {}
+    for group, by_label in per.items():
+        out[group] = {"planes": planes[group]}
+        for label, scores in by_label.items():
+            out[group][label] = {k: float(np.nanmean([s[k] for s in scores]))
+                                 for k in ("interior_mean", "rim_mean", "interior_median",
+                                           "rim_median", "coverage")}
+            out[group][label]["frames"] = len(scores)
+    return out
+
+
+def speed(root: Path, repeats: int) -> list[dict]:
+    """Single-thread ms of 3f2n+ and OpenCV FALS window 7 per frame, interleaved."""
+    import cv2
+
+    dn.set_num_threads(1)
+    cv2.setNumThreads(1)
+    rows = []
+    for frame in open_dataset(root):
+        depth = frame.depth.astype(np.float32)
+        K = frame.K
+        h, w = depth.shape
+        fals = cv2.rgbd.RgbdNormals_create(h, w, cv2.CV_32F, np.asarray(K, np.float64), 7,
+                                           cv2.rgbd.RgbdNormals_RGBD_NORMALS_METHOD_FALS)
+        points = cv2.rgbd.depthTo3d(depth, K)
+        (ours_cpu, ours_wall), (cv_cpu, cv_wall) = _measure(
+            [lambda d=depth, k=K: dn.estimate_normals(d, k, method="3f2n+"),
+             lambda f=fals, p=points: f.apply(p)], repeats)
+        rows.append({"group": frame.group, "frame": frame.name, "size": f"{w}x{h}",
+                     "3f2n+_cpu_ms": ours_cpu, "3f2n+_wall_ms": ours_wall,
+                     "opencv-fals-7_cpu_ms": cv_cpu, "opencv-fals-7_wall_ms": cv_wall,
+                     "ratio_cpu": ours_cpu / cv_cpu, "ratio_wall": ours_wall / cv_wall})
+    return rows
+
+
+def _table(acc: dict, labels: list[str], key: str, scale: float = 1.0, digits: int = 2) -> str:
+    groups = list(acc)
+    head = "| method | " + " | ".join(groups) + " | mean over folders |"
+    lines = [head, "|---|" + "---:|" * (len(groups) + 1)]
+    for label in labels:
+        vals = [acc[g][label][key] * scale for g in groups]
+        cells = [f"{v:.{digits}f}" if np.isfinite(v) else "-" for v in vals]
+        mean = float(np.nanmean(vals)) if np.isfinite(vals).any() else float("nan")
+        lines.append(f"| {label} | " + " | ".join(cells) + f" | {mean:.{digits}f} |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    from depthnormals.commands.bench import machine
+
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--root", type=Path, default=ROOT, help="real sensor folder(s)")
+    parser.add_argument("--methods", default=",".join(METHODS),
+                        help=f"comma-separated, from: {', '.join(METHODS)}")
+    parser.add_argument("--json", type=Path, default=None, metavar="OUT",
+                        help="write every number, the machine and the command here")
+    parser.add_argument("--repeats", type=int, default=5, help="timing repeats per frame")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the plane reference")
+    parser.add_argument("--no-speed", action="store_true", help="skip the timing")
+    args = parser.parse_args(argv)
+    labels = [m.strip() for m in args.methods.split(",") if m.strip()]
+    unknown = [m for m in labels if m not in METHODS]
+    if unknown:
+        parser.error(f"unknown method(s) {', '.join(unknown)}; use {', '.join(METHODS)}")
+    if not args.root.is_dir():
+        parser.error(f"{args.root} does not exist")
+    print(f"machine: {machine()}; plane reference seed {args.seed}; {args.root}")
+    acc = accuracy(args.root, labels, args.seed)
+    print("\nplanes per folder: " + ", ".join(f"{g} {acc[g]['planes']}" for g in acc))
+    print("\n### interior mean error (deg), >= 5 px inside the planes\n")
+    print(_table(acc, labels, "interior_mean"))
+    print("\n### rim mean error (deg), 1-4 px inside\n")
+    print(_table(acc, labels, "rim_mean"))
+    print("\n### coverage (% of plane pixels with an estimate)\n")
+    print(_table(acc, labels, "coverage", 100.0, 1))
+    timing: list[dict] = []
+    if not args.no_speed:
+        timing = speed(args.root, args.repeats)
+        print(f"\n### 1 thread, 3f2n+ vs OpenCV FALS window 7, median of {args.repeats} "
+              "(interleaved)\n")
+        print("| frame | size | 3f2n+ ms (cpu / wall) | OpenCV FALS 7 ms (cpu / wall) "
+              "| ratio cpu | ratio wall |")
+        print("|---|---|---:|---:|---:|---:|")
+        for r in timing:
+            print(f"| {r['group']}/{r['frame']} | {r['size']} | {r['3f2n+_cpu_ms']:.1f} / "
+                  f"{r['3f2n+_wall_ms']:.1f} | {r['opencv-fals-7_cpu_ms']:.1f} / "
+                  f"{r['opencv-fals-7_wall_ms']:.1f} | {r['ratio_cpu']:.2f} | {r['ratio_wall']:.2f} |")
+        ratios = [r["ratio_cpu"] for r in timing]
+        print(f"\nmedian ratio (cpu) {np.median(ratios):.2f}, range {min(ratios):.2f}-{max(ratios):.2f}")
+    if args.json is not None:
+        args.json.write_text(json.dumps({"machine": machine(), "methods": labels,
+                                         "seed": args.seed, "accuracy": acc, "speed": timing},
+                                        indent=2, default=float) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
