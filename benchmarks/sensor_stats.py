@@ -31,6 +31,7 @@ to the same clean renders.
 Run (about a minute on the 2-core VM)::
 
     python benchmarks/sensor_stats.py [--views 3] [--scenes living_room,office,...] [--json OUT]
+    python benchmarks/sensor_stats.py --models kinect_v1:window=1,kinect_v1:window=7,kinect_v1
 """
 
 from __future__ import annotations
@@ -237,22 +238,30 @@ def simulated_views(scenes: tuple[str, ...], views: int, seed: int) -> list:
     return out
 
 
-def simulate(model: str, renders: list, seed: int) -> list[np.ndarray]:
+def simulate(spec: str, renders: list, seed: int) -> list[np.ndarray]:
+    """Noisy depth of the noise spec ``spec`` (``"kinect_v1"``, ``"kinect_v1:window=7"``, ...)
+    for every render; each view has its own generator from (seed, model, view)."""
     from depthnormals.render import render_subsamples
     from depthnormals.synth import noise
 
+    model, st = noise.parse_noise_spec(spec)
     out = []
     for j, (scene, pose, r) in enumerate(renders):
-        rng = np.random.default_rng([seed, 7, MODELS.index(model), j])
+        rng = np.random.default_rng([seed, 7, noise.MODELS.index(model), j])
         if model == "kinect_v1":
-            out.append(noise.kinect_v1_noise(r.depth, r.normals, PRIMESENSE, rng=rng))
+            out.append(noise.kinect_v1_noise(r.depth, r.normals, PRIMESENSE, rng=rng, **st))
         elif model == "realsense_d4xx":
-            out.append(noise.realsense_d4xx_noise(r.depth, r.normals, PRIMESENSE, rng=rng))
-        else:
-            sub = render_subsamples(scene.vertices, scene.faces, PRIMESENSE, pose=pose, width=SIZE[1],
-                                    height=SIZE[0], mask=noise.discontinuity_mask(r.depth))
+            out.append(noise.realsense_d4xx_noise(r.depth, r.normals, PRIMESENSE, rng=rng, **st))
+        elif model in ("kinect_v2", "tof"):
+            factor = st.pop("supersample", 3)
+            sub = None if factor <= 1 else render_subsamples(
+                scene.vertices, scene.faces, PRIMESENSE, pose=pose, width=SIZE[1], height=SIZE[0],
+                factor=factor, mask=noise.discontinuity_mask(r.depth))
             fn = noise.kinect_v2_noise if model == "kinect_v2" else noise.tof_noise
-            out.append(fn(r.depth, r.normals, PRIMESENSE, rng=rng, subsamples=sub))
+            out.append(fn(r.depth, r.normals, PRIMESENSE, rng=rng, subsamples=sub, **st))
+            st["supersample"] = factor
+        else:
+            out.append(noise.gaussian_noise(r.depth, PRIMESENSE, rng=rng, **st))
     return out
 
 
@@ -287,7 +296,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scenes", default=",".join(SCENES), help="indoor scenes (comma-separated)")
     ap.add_argument("--views", type=int, default=3, help="views per scene")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--models", default=",".join(MODELS))
+    ap.add_argument("--models", default=",".join(MODELS),
+                    help="noise specs, comma-separated (e.g. kinect_v1,kinect_v1:window=7)")
     ap.add_argument("--json", type=Path, help="write every statistic here")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
