@@ -18,8 +18,8 @@ each noise model of :mod:`depthnormals.synth.noise` (``kinect_v1``, ``kinect_v2`
   at 2 m, 46 mm at 4 m.
 - ``ac1 .. ac8``: the autocorrelation at lags 1, 2, 4, 8 px of the residual of a plane fitted
   to ``1/z`` on non-overlapping 31 x 31 windows (all pixels valid, no jump above 5 %, residual
-  RMS under 1 % of the depth: the large planes of the frame), averaged over rows and columns
-  and over windows.
+  RMS between 10 um and 1 % of the depth: the large planes of the frame), averaged over rows
+  and columns and over windows.
 - ``est. noise``: :func:`depthnormals.estimate_noise` (robust second differences of ``1/z``, in
   pixel footprints ``z / f``), median over the frames, and how many frames read exactly 0:
   the failure mode of quantised depth, whose plateaus have zero second differences.
@@ -28,7 +28,8 @@ The simulated views are rendered at 640 x 480 with the PrimeSense default intrin
 = 525, the TUM frames' camera) from indoor scenes of the ``mixed`` set; every model is applied
 to the same clean renders.
 
-Run (about a minute on the 2-core VM)::
+Run (13-22 s on the shared 2-core Xeon VM; results in docs/synthetic.md, "Sensor models
+against real frames")::
 
     python benchmarks/sensor_stats.py [--views 3] [--scenes living_room,office,...] [--json OUT]
     python benchmarks/sensor_stats.py --models kinect_v1:window=1,kinect_v1:window=7,kinect_v1
