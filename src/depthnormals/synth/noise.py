@@ -37,11 +37,10 @@ Models
     Active stereo (:func:`realsense_d4xx_noise`): disparity ``d = f b / z`` (``b = 50`` mm,
     D435) plus ``N(0, 0.08 px)`` correlated over a 5 x 5 matching window, rounded to 1/32
     px, so the depth std grows as ``z^2 * 0.08 / (f b)`` (Intel's D400 tuning white paper);
-    edge fattening (the foreground
-    spreads ``fatten_px`` pixels into the background); holes where the second imager cannot
-    see (left-right occlusion, :func:`stereo_occlusion`), nearer than ``f b / 126`` (the
-    disparity search range) or farther than 10 m, and where the projected pattern is weak
-    (far or grazing).
+    edge fattening (the foreground spreads ``fatten_px`` pixels into the background); holes
+    where the second imager cannot see (left-right occlusion, :func:`stereo_occlusion`),
+    nearer than ``f b / 126`` (the disparity search range) or farther than 10 m, and where the
+    projected pattern is weak (far or grazing).
 ``tof``
     Continuous-wave time of flight (:func:`tof_noise`): flying pixels at depth jumps (mixed
     returns), random error ``sigma ~ 1/sqrt(amplitude)`` (correlated over a Gaussian of
