@@ -56,13 +56,14 @@ def test_estimate_all_invalid_warns_and_exits_3(tmp_path, k_json, capsys, value)
     assert np.isnan(np.load(out)).all()          # the (all-NaN) answer is still written
 
 
-def test_estimate_one_valid_pixel_is_not_exit_3(tmp_path, k_json, capsys):
+def test_estimate_one_valid_pixel_is_exit_3(tmp_path, k_json, capsys):
+    """One policy for all-NaN output: a lone valid pixel has no normal either."""
     z = np.zeros((20, 24), np.float32)
     z[5, 5] = 2.0
     np.save(tmp_path / "d.npy", z)
     assert main(["estimate", str(tmp_path / "d.npy"), "-K", str(k_json),
-                 "-o", str(tmp_path / "n.npy")]) == 0
-    assert "warning" not in capsys.readouterr().err
+                 "-o", str(tmp_path / "n.npy")]) == 3
+    assert "none has a valid neighbour" in capsys.readouterr().err
 
 
 # ------------------------------------------------------------------- --shape for raw .bin
@@ -99,7 +100,7 @@ def test_estimate_bad_shape_is_a_usage_error(tmp_path, k_json, capsys, bad):
     ("{fx: 300, fy: 310", "not valid JSON"),
     ('{"f": 300}', "needs keys fx, fy, cx, cy or K"),
     ('{"fx": -300, "fy": 310, "cx": 11.5, "cy": 9.5}', "focal lengths must be > 0"),
-    ('{"K": [1, 2, 3]}', "cannot reshape"),
+    ('{"K": [1, 2, 3]}', "holds 9 (3x3) or 12 (3x4) numbers"),
 ])
 def test_malformed_intrinsics_name_the_file_and_a_valid_one(tmp_path, capsys, text, says):
     np.save(tmp_path / "d.npy", _plane())

@@ -8,6 +8,8 @@ estimators) and equivariance under transposition and 180-degree rotation of the 
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -58,8 +60,10 @@ def depth_maps(draw):
 @given(case=depth_maps())
 def test_random_depth_maps(method, case):
     z, K = case
-    with np.errstate(all="raise"):  # no floating-point warnings leak out either
+    with np.errstate(all="raise"), warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", dn.NoValidNormalWarning)  # no other warning leaks out
         n = dn.estimate_normals(z, K, method=method)
+    assert bool(caught) == bool(np.isnan(n).all())  # warned exactly when no normal is finite
     assert n.shape == (*z.shape, 3) and n.dtype == np.float32
     invalid = ~(np.isfinite(z) & (z > 0))
     assert np.isnan(n[invalid]).all()

@@ -5,6 +5,8 @@ Run over the registry, so estimators added later are covered automatically.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -29,16 +31,16 @@ def err_deg(n, truth):
 # --- bad input ---------------------------------------------------------------------------
 
 @pytest.mark.parametrize("method", METHODS)
-@pytest.mark.parametrize("depth", [np.ones(5), np.ones((3, 4, 1)), np.ones((2, 3, 4, 1)),
+@pytest.mark.parametrize("depth", [np.ones(5), np.ones((3, 4, 3)), np.ones((2, 3, 4, 1)),
                                    np.float64(2.0)], ids=["1d", "3d", "4d", "0d"])
 def test_wrong_ndim(method, depth):
     with pytest.raises(ValueError, match=r"2-D array \(H, W\).*got shape"):
         dn.estimate_normals(depth, K, method=method)
 
 
-def test_single_channel_hint():
-    with pytest.raises(ValueError, match=r"depth\[\.\.\., 0\]"):
-        dn.estimate_normals(np.ones((4, 5, 1)), K)
+def test_single_channel_is_squeezed():
+    z = np.full((4, 5), 2.0)
+    assert np.array_equal(dn.estimate_normals(z[..., None], K), dn.estimate_normals(z, K), equal_nan=True)
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -200,7 +202,8 @@ def test_metrics_size_mismatch():
 
 @pytest.mark.parametrize("method", METHODS)
 def test_one_pixel(method):
-    n = dn.estimate_normals(np.array([[2.0]]), K, method=method)
+    with pytest.warns(dn.NoValidNormalWarning, match="none has a valid neighbour"):
+        n = dn.estimate_normals(np.array([[2.0]]), K, method=method)
     assert n.shape == (1, 1, 3) and n.dtype == np.float32
     assert np.isnan(n).all()  # one point has no normal
 
@@ -209,7 +212,10 @@ def test_one_pixel(method):
 @pytest.mark.parametrize("shape", [(2, 2), (3, 3), (1, 5), (5, 1), (2, 7)])
 def test_tiny_images(method, shape):
     z, _ = plane(shape, K=(120.0, 110.0, 1.0, 1.0))
-    n = dn.estimate_normals(z, (120.0, 110.0, 1.0, 1.0), method=method)
+    with warnings.catch_warnings(record=True) as caught:  # warned exactly when all is NaN
+        warnings.simplefilter("always", dn.NoValidNormalWarning)
+        n = dn.estimate_normals(z, (120.0, 110.0, 1.0, 1.0), method=method)
+    assert bool(caught) == bool(np.isnan(n).all())
     assert n.shape == (*shape, 3) and n.dtype == np.float32
     ok = np.isfinite(n).all(axis=-1)
     assert np.array_equal(ok, ~np.isnan(n).any(axis=-1))
@@ -240,7 +246,8 @@ def test_tiny_images_d2nt(variant):
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("value", [0.0, -1.0, np.nan, np.inf, -np.inf])
 def test_all_invalid(method, value):
-    n = dn.estimate_normals(np.full((6, 7), value), K, method=method)
+    with pytest.warns(dn.NoValidNormalWarning, match="no pixel of the depth holds a valid depth"):
+        n = dn.estimate_normals(np.full((6, 7), value), K, method=method)
     assert n.shape == (6, 7, 3) and n.dtype == np.float32 and np.isnan(n).all()
 
 
@@ -359,7 +366,8 @@ def test_isolated_valid_pixel_and_valid_pairs(method):
     """Only pixels without any valid neighbour lack an estimate; nothing raises."""
     z = np.full((5, 5), np.nan)
     z[2, 2] = 2.0  # isolated
-    n = dn.estimate_normals(z, K, method=method)
+    with pytest.warns(dn.NoValidNormalWarning):
+        n = dn.estimate_normals(z, K, method=method)
     assert np.isnan(n).all()
 
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from . import datasets, io
 from ._parallel import get_num_threads, set_num_threads
+from ._validate import NoValidNormalWarning
 from .camera import Intrinsics, as_intrinsics, backproject
 from .ddm import (
     discontinuity_discrimination,
@@ -45,6 +46,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "Intrinsics",
+    "NoValidNormalWarning",
     "NormalMetrics",
     "__version__",
     "angle_weighted",

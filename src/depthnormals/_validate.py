@@ -8,7 +8,29 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["check_choice", "check_depth", "check_int", "check_normals", "check_positive", "check_real"]
+__all__ = ["NoValidNormalWarning", "check_choice", "check_depth", "check_int", "check_normals",
+           "check_positive", "check_real", "no_valid_normal_message"]
+
+
+class NoValidNormalWarning(RuntimeWarning):
+    """The output holds no finite normal (every pixel NaN).
+
+    One policy for all-NaN output (docs/conventions.md, "Errors and exit status"): the API
+    returns the all-NaN array and warns with this category; the command line writes it and
+    exits with status 3. It happens when no depth pixel is valid (all 0, negative, NaN or
+    inf: often a missing ``depth_scale`` or a wrong file) and when no valid pixel has a valid
+    neighbour (a 1x1 image, isolated points).
+    """
+
+
+def no_valid_normal_message(depth: np.ndarray, what: str = "the depth") -> str:
+    """Why an output holds no finite normal, for :class:`NoValidNormalWarning` and the CLI."""
+    valid = int(np.count_nonzero(np.isfinite(depth) & (depth > 0)))
+    if valid == 0:
+        return (f"no pixel of {what} holds a valid depth (all are 0, negative, NaN or inf), so "
+                "every normal is NaN; check the file, the depth scale and the image shape")
+    return (f"{what} has {valid} valid pixel(s) of {depth.size}, but none has a valid neighbour "
+            f"({depth.shape[0]} x {depth.shape[1]} pixels), so every normal is NaN")
 
 
 def check_positive(value: Any, name: str, *, allow_none: bool = False) -> float | None:
@@ -68,6 +90,8 @@ def check_depth(depth: Any, *, depth_scale: float | None = None, name: str = "de
     float32 and float64 are preserved (float16 becomes float32); integer depth needs an
     explicit ``depth_scale`` (metres per unit, e.g. 0.001 for millimetres) and becomes float32.
     Invalid values (0, negative, NaN, inf) are kept as they are: estimators mask them.
+    A single-channel image ``(H, W, 1)`` is taken as its one channel ``(H, W)``; any other
+    3-D shape is refused (``(H, W, 3)`` / ``(H, W, 4)`` named as a colour image).
     """
     if isinstance(depth, (str, bytes)) or depth is None:
         raise TypeError(f"{name} must be a 2-D numeric array (H, W); got {type(depth).__name__}")
@@ -77,9 +101,14 @@ def check_depth(depth: Any, *, depth_scale: float | None = None, name: str = "de
             f"{name} must hold real numbers (float32/float64, or integers with depth_scale); "
             f"got dtype {arr.dtype}"
         )
+    if arr.ndim == 3 and arr.shape[-1] == 1:  # a single-channel image (H, W, 1): its one channel
+        arr = arr[..., 0]
     if arr.ndim != 2:
-        hint = f" (use {name}[..., 0] for a single-channel image)" if arr.ndim == 3 else ""
-        raise ValueError(f"{name} must be a 2-D array (H, W); got shape {arr.shape}{hint}")
+        hint = ""
+        if arr.ndim == 3 and arr.shape[-1] in (3, 4):
+            hint = (f": {arr.shape[-1]} channels, a colour image rather than a depth map; pass "
+                    "the depth image itself")
+        raise ValueError(f"{name} must be a 2-D array (H, W) or (H, W, 1); got shape {arr.shape}{hint}")
     if arr.size == 0:
         raise ValueError(f"{name} is empty (shape {arr.shape}); it needs at least one pixel")
     scale = check_positive(depth_scale, "depth_scale", allow_none=True)

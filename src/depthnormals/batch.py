@@ -158,15 +158,13 @@ def estimate_normals_batch(estimate: Callable[..., np.ndarray], depth: Any, K: A
 
     Notes
     -----
-    Interpretation: a 3-D array whose last axis has length 1 is taken for a single-channel
-    image, not for N frames of width 1, and rejected with the hint of the 2-D check.
+    Every 3-D array is a stack here; :func:`depthnormals.estimate_normals` decides first
+    whether a 3-D depth is a stack, one single-channel image ``(H, W, 1)`` or a colour image
+    (its ``stack`` argument).
     """
     arr = depth if isinstance(depth, np.ndarray) else np.asarray(depth)
     if arr.ndim != 3:
         raise ValueError(f"a batch of depth frames must have shape (N, H, W); got shape {arr.shape}")
-    if arr.shape[-1] == 1:
-        raise ValueError(f"depth must be a 2-D array (H, W) or a stack (N, H, W); got shape {arr.shape} "
-                         "(use depth[..., 0] for a single-channel image)")
     if arr.shape[0] == 0:
         raise ValueError(f"the batch of depth frames is empty (shape {arr.shape})")
     n, h, w = arr.shape

@@ -78,7 +78,20 @@ IntrinsicsLike = Union[Intrinsics, np.ndarray, Sequence[float], Mapping[str, flo
 
 
 def as_intrinsics(K: Any) -> Intrinsics:
-    """Accept an :class:`Intrinsics`, a 3x3 matrix, ``(fx, fy, cx, cy)`` or a mapping with those keys."""
+    """Accept any of the camera descriptions below and return an :class:`Intrinsics`.
+
+    - an :class:`Intrinsics`;
+    - a 3x3 matrix ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` (no skew);
+    - a 3x4 projection matrix ``P = [[fx, 0, cx, Tx], [0, fy, cy, Ty], [0, 0, 1, 0]]`` (ROS
+      ``camera_info``'s P of a rectified camera: its left 3x3 block; ``Tx, Ty``, the stereo
+      baseline terms, do not change the pixel rays and are ignored);
+    - ``(fx, fy, cx, cy)`` or a mapping with those keys;
+    - an Open3D ``PinholeCameraIntrinsic`` (any object with an ``intrinsic_matrix``
+      attribute holding the 3x3 matrix; Open3D's pixel grid is 0-based like ours).
+
+    Raises ValueError for a wrong shape, skew, non-finite values or focal lengths <= 0, and
+    TypeError for anything else.
+    """
     if isinstance(K, Intrinsics):
         return K
     if isinstance(K, Mapping):
@@ -88,9 +101,11 @@ def as_intrinsics(K: Any) -> Intrinsics:
         return Intrinsics(K["fx"], K["fy"], K["cx"], K["cy"])
     if K is None or isinstance(K, (str, bytes)):
         raise TypeError(
-            "K must be an Intrinsics, a 3x3 matrix, (fx, fy, cx, cy) or a mapping; "
-            f"got {type(K).__name__}"
+            "K must be an Intrinsics, a 3x3 matrix, a 3x4 projection matrix, (fx, fy, cx, cy), a "
+            f"mapping or an Open3D PinholeCameraIntrinsic; got {type(K).__name__}"
         )
+    if not isinstance(K, (np.ndarray, list, tuple)) and hasattr(K, "intrinsic_matrix"):
+        return Intrinsics.from_matrix(np.asarray(K.intrinsic_matrix, dtype=np.float64))  # Open3D
     raw = np.asarray(K)
     mixed = not isinstance(K, np.ndarray) and any(
         isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating))
@@ -98,7 +113,7 @@ def as_intrinsics(K: Any) -> Intrinsics:
     )
     if mixed or raw.dtype == bool or raw.dtype.kind not in "iuf":
         raise TypeError(
-            "K must hold real numbers (a 3x3 matrix or fx, fy, cx, cy); "
+            "K must hold real numbers (a 3x3 matrix, a 3x4 projection matrix or fx, fy, cx, cy); "
             f"got dtype {raw.dtype} from {K!r}"
         )
     M = raw.astype(np.float64)
@@ -106,7 +121,17 @@ def as_intrinsics(K: Any) -> Intrinsics:
         return Intrinsics(*M.tolist())
     if M.shape == (3, 3):
         return Intrinsics.from_matrix(M)
-    raise ValueError(f"K must be a 3x3 matrix or (fx, fy, cx, cy); got shape {M.shape}")
+    if M.shape == (3, 4):
+        try:
+            if M[2, 3] != 0 or not np.all(np.isfinite(M[:, 3])):
+                raise ValueError("its last row must be [0, 0, 1, 0] and its values finite")
+            return Intrinsics.from_matrix(M[:, :3])
+        except ValueError as exc:
+            raise ValueError(f"K must be a 3x3 matrix, or a 3x4 projection matrix [[fx, 0, cx, Tx], "
+                             f"[0, fy, cy, Ty], [0, 0, 1, 0]]; the 3x4 {M.tolist()} is not one: "
+                             f"{exc}") from exc
+    raise ValueError(f"K must be a 3x3 matrix, a 3x4 projection matrix or (fx, fy, cx, cy); got shape "
+                     f"{M.shape}")
 
 
 def backproject(depth: Any, K: Any, *, depth_scale: float | None = None) -> np.ndarray:

@@ -10,21 +10,30 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
+import struct
 import tempfile
-from collections.abc import Iterator
+import zlib
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ._png import encode_png, read_png
-from ._validate import check_depth, check_normals
+from ._validate import check_depth, check_normals, check_positive
 from .camera import Intrinsics, as_intrinsics
 
 __all__ = [
+    "OUTPUT_SUFFIXES",
+    "VIS_CONVENTIONS",
+    "CameraFile",
     "atomic_write",
     "normals_to_rgb8",
+    "not_depth_reason",
+    "read_camera_file",
     "read_depth",
     "read_intrinsics",
     "read_normals",
@@ -35,7 +44,11 @@ __all__ = [
     "write_png",
 ]
 
-DEPTH_SUFFIXES = (".npy", ".png", ".tif", ".tiff", ".bin")
+DEPTH_SUFFIXES = (".npy", ".png", ".tif", ".tiff", ".bin", ".pgm")
+#: Colourings of the 8-bit ``.vis.png`` picture (:func:`normals_to_rgb8`).
+VIS_CONVENTIONS = ("3f2n", "open3d")
+#: Larger depth images than this many pixels are refused (a corrupt header, not a sensor).
+MAX_PIXELS = 1 << 28
 
 
 def _umask() -> int:
@@ -82,42 +95,61 @@ def write_png(path: str | Path, img: np.ndarray) -> None:
 
 
 def read_depth(path: str | Path, *, depth_scale: float | None = None,
-               shape: tuple[int, int] | None = None) -> np.ndarray:
+               shape: tuple[int, int] | None = None, invalid: Sequence[float] = (),
+               max_depth: float | None = None) -> np.ndarray:
     """Read a depth map.
 
     Parameters
     ----------
     path : str or Path
-        ``.npy`` (float or integer array), ``.png`` (16-bit grey; needs ``depth_scale``),
-        ``.tif``/``.tiff`` (float32, needs the ``tifffile`` package: ``pip install
-        depthnormals[io]``) or ``.bin`` (3F2N format: raw little-endian float32).
+        ``.npy`` (float or integer array, (H, W) or (H, W, 1)), ``.png`` (16-bit grey; needs
+        ``depth_scale``), ``.pgm`` (binary P5, 8- or 16-bit big-endian as NYU's raw frames;
+        needs ``depth_scale``), ``.tif``/``.tiff`` (float32, needs the ``tifffile`` package:
+        ``pip install depthnormals[io]``) or ``.bin`` (3F2N format: raw little-endian float32).
     depth_scale : float, optional
         Metres per unit, required for integer data (e.g. 0.001 for millimetre PNGs).
     shape : (H, W), optional
         Size of a ``.bin`` file; default 480 x 640 as in the 3F2N dataset.
+    invalid : sequence of numbers, optional
+        Raw values (before ``depth_scale``) that mark invalid pixels, e.g. ``(65535,)`` or
+        Kinect v1's ``2047``: they become NaN.
+    max_depth : float, optional
+        Depth beyond this many metres (after scaling) becomes NaN (invalid).
 
     Returns
     -------
     depth : ndarray, shape (H, W), float32 or float64
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    ValueError
+        A corrupt or truncated file, a colour image, a wrong shape, or a bad option; the
+        message names the file.
     """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"depth file {path} does not exist")
     suffix = path.suffix.lower()
     if suffix == ".npy":
-        arr = np.load(path, allow_pickle=False)
+        arr = _read_npy(path)
     elif suffix == ".png":
-        arr = read_png(path)
-        if arr.ndim != 2:
-            raise ValueError(f"{path}: a depth PNG must be single-channel; got shape {arr.shape}")
+        try:
+            arr = read_png(path)
+        except (ValueError, struct.error, IndexError, zlib.error, MemoryError) as exc:
+            raise ValueError(f"{path} is not a readable PNG: {_reason(exc, path)}") from exc
+    elif suffix == ".pgm":
+        arr = _read_pgm(path)
     elif suffix in (".tif", ".tiff"):
         try:
             import tifffile
         except ImportError as exc:
             raise ImportError("reading TIFF depth needs tifffile: pip install 'depthnormals[io]'") from exc
-        arr = tifffile.imread(path)
-        if arr.ndim == 3 and arr.shape[-1] == 1:
-            arr = arr[..., 0]
+        try:
+            arr = tifffile.imread(path)
+        except Exception as exc:  # tifffile raises many kinds on a corrupt file
+            raise ValueError(f"{path} is not a readable TIFF: {exc}") from exc
     elif suffix == ".bin":
         h, w = shape if shape is not None else (480, 640)
         arr = np.fromfile(path, dtype="<f4")
@@ -127,21 +159,213 @@ def read_depth(path: str | Path, *, depth_scale: float | None = None,
         arr = arr.reshape(h, w)
     else:
         raise ValueError(f"{path}: unknown depth format {suffix!r}; use one of {', '.join(DEPTH_SUFFIXES)}")
-    return check_depth(arr, depth_scale=depth_scale, name=f"depth in {path.name}")
+    if arr.ndim == 3 and arr.shape[-1] == 1:
+        arr = arr[..., 0]
+    if arr.ndim != 2:
+        what = (f"a colour image ({arr.shape[-1]} channels)" if arr.ndim == 3 and arr.shape[-1] in (2, 3, 4)
+                else f"{arr.ndim} dimensions")
+        raise ValueError(f"{path} holds an array of shape {arr.shape}, {what}, not a single-channel "
+                         "depth image (H, W); pass the depth image itself")
+    bad = None
+    if len(invalid):
+        codes = np.asarray([float(_finite(c, "invalid")) for c in invalid])
+        bad = np.isin(arr, codes.astype(arr.dtype) if arr.dtype.kind in "iu" else codes)
+    z = check_depth(arr, depth_scale=depth_scale, name=f"depth in {path}")
+    if bad is not None and bad.any():
+        z = z if z is not arr else z.copy()
+        z[bad] = np.nan
+    if max_depth is not None:
+        limit = check_positive(max_depth, "max_depth")
+        with np.errstate(invalid="ignore"):
+            far = z > limit
+        if far.any():
+            z = z if z is not arr else z.copy()
+            z[far] = np.nan
+    return z
 
 
-def read_intrinsics(path: str | Path) -> Intrinsics:
-    """Read camera intrinsics.
+def _reason(exc: BaseException, path: Path) -> str:
+    text = str(exc) or type(exc).__name__
+    return text.replace(f"{path} ", "").replace(str(path), "").strip() or type(exc).__name__
 
-    Accepts JSON or YAML with ``fx, fy, cx, cy`` (0-based) or ``K`` (3x3, nested or flat),
-    optionally under a ``camera`` or ``intrinsics`` key, and 3F2N ``params.txt``
-    (``fx fy cx cy N`` on MATLAB's 1-based grid: converted to 0-based by subtracting 1).
+
+def _finite(value: Any, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name} values must be numbers; got {value!r}")
+    if not math.isfinite(float(value)) and not math.isnan(float(value)):
+        raise ValueError(f"{name} values must be finite numbers or NaN; got {value!r}")
+    return float(value)
+
+
+def _npy_header(path: Path) -> tuple[tuple[int, ...], np.dtype]:
+    """Shape and dtype of a ``.npy`` file from its header; ValueError naming the file when the
+    header is corrupt or the data is shorter than the header says."""
+    try:
+        with open(path, "rb") as fh:
+            version = np.lib.format.read_magic(fh)
+            if version == (1, 0):
+                shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+            else:
+                shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+            offset = fh.tell()
+    except (ValueError, OSError, EOFError, SyntaxError, TypeError) as exc:
+        raise ValueError(f"{path} is not a readable .npy file: {exc}") from exc
+    if dtype.hasobject:
+        raise ValueError(f"{path} holds Python objects (dtype {dtype}); a depth .npy holds numbers")
+    count = math.prod(shape)
+    need = offset + count * dtype.itemsize
+    size = path.stat().st_size
+    if size < need:
+        raise ValueError(f"{path} is truncated: its header says {shape} {dtype} ({need} bytes), the "
+                         f"file has {size} bytes")
+    return shape, dtype
+
+
+def _read_npy(path: Path) -> np.ndarray:
+    shape, _ = _npy_header(path)
+    if math.prod(shape) > MAX_PIXELS:
+        raise ValueError(f"{path} holds shape {shape}: more than {MAX_PIXELS} values, not a depth image")
+    try:
+        return np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise ValueError(f"{path} is not a readable .npy file: {exc}") from exc
+
+
+def _read_pgm(path: Path) -> np.ndarray:
+    """A binary (P5) PGM: 8-bit, or 16-bit big-endian when maxval > 255 (NYU v2's raw depth)."""
+    data = path.read_bytes()
+    fields: list[bytes] = []
+    pos = 0
+    while len(fields) < 4:
+        while pos < len(data) and data[pos:pos + 1].isspace():
+            pos += 1
+        if data[pos:pos + 1] == b"#":
+            while pos < len(data) and data[pos:pos + 1] not in (b"\n", b"\r"):
+                pos += 1
+            continue
+        start = pos
+        while pos < len(data) and not data[pos:pos + 1].isspace() and data[pos:pos + 1] != b"#":
+            pos += 1
+        if start == pos:
+            raise ValueError(f"{path} is not a readable PGM: the header is truncated")
+        fields.append(data[start:pos])
+    pos += 1  # the single whitespace after maxval
+    if fields[0] != b"P5":
+        raise ValueError(f"{path} is not a binary PGM (magic {fields[0][:8]!r}; expected P5)")
+    try:
+        w, h, maxval = (int(x) for x in fields[1:])
+    except ValueError as exc:
+        raise ValueError(f"{path} is not a readable PGM: bad header {b' '.join(fields[1:])!r}") from exc
+    if w < 1 or h < 1 or not 0 < maxval < 65536:
+        raise ValueError(f"{path} is not a readable PGM: size {w} x {h}, maxval {maxval}")
+    if w * h > MAX_PIXELS:
+        raise ValueError(f"{path}: a {w} x {h} PGM is larger than any depth image")
+    dtype = np.dtype(">u2") if maxval > 255 else np.dtype("u1")
+    need = w * h * dtype.itemsize
+    if len(data) - pos < need:
+        raise ValueError(f"{path} is truncated: {w} x {h} pixels need {need} bytes, it has {len(data) - pos}")
+    return np.frombuffer(data, dtype=dtype, count=w * h, offset=pos).reshape(h, w).astype(
+        np.uint16 if maxval > 255 else np.uint8)
+
+
+def not_depth_reason(path: str | Path) -> str | None:
+    """Why a file with a depth suffix is not a depth image, from its header alone, or None.
+
+    What a folder run (``depthnormals estimate FOLDER``) uses to skip the colour PNGs and
+    ``.npy`` arrays that often sit beside depth images: a colour PNG (RGB, RGBA, palette)
+    or an array that is not (H, W) / (H, W, 1). Unreadable files return None here: reading
+    them raises the error that names them.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    try:
+        if suffix == ".png":
+            with open(path, "rb") as fh:
+                head = fh.read(33)
+            if len(head) < 26 or head[12:16] != b"IHDR":
+                return None
+            ctype = head[25]
+            names = {2: "RGB", 3: "palette", 4: "grey + alpha", 6: "RGBA"}
+            return f"a colour image ({names[ctype]} PNG)" if ctype in names else None
+        if suffix == ".npy":
+            shape, dtype = _npy_header(path)
+            if len(shape) == 2 or (len(shape) == 3 and shape[-1] == 1):
+                return None if dtype.kind in "iuf" else f"an array of {dtype}, not depth"
+            return f"an array of shape {shape}, not a depth image (H, W)"
+    except (OSError, ValueError):
+        return None
+    return None
+
+@dataclass(frozen=True)
+class CameraFile:
+    """What a camera file says: the intrinsics, and what it may add about the depth images.
+
+    Attributes
+    ----------
+    K : Intrinsics
+        The camera (0-based pixel centres).
+    depth_scale : float or None
+        Metres per unit of the integer depth images (key ``depth_scale``).
+    invalid : tuple of float
+        Raw depth values that mark invalid pixels (key ``invalid``, e.g. ``[65535]`` or
+        ``[0, 2047]``), compared before scaling.
+    max_depth : float or None
+        Depth beyond this many metres is invalid (key ``max_depth``).
+    source : Path
+        The file read.
+    """
+
+    K: Intrinsics
+    depth_scale: float | None = None
+    invalid: tuple[float, ...] = ()
+    max_depth: float | None = None
+    source: Path | None = None
+
+
+def read_camera_file(path: str | Path) -> CameraFile:
+    """Read a camera file: intrinsics, and optionally the depth scale and invalid codes.
+
+    The formats, told apart by suffix and content:
+
+    - JSON or YAML with ``fx, fy, cx, cy`` (pixels, 0-based), ``K`` / ``k`` (3x3, nested or
+      flat), or ``P`` / ``p`` (3x4 projection), optionally under a ``camera`` or
+      ``intrinsics`` key; beside them, optional ``depth_scale`` (metres per unit),
+      ``invalid`` (list of raw values, e.g. ``[0, 65535]``) and ``max_depth`` (metres).
+    - ROS ``camera_info`` YAML (``camera_calibration_parsers``: ``camera_matrix: {rows: 3,
+      cols: 3, data: [...]}``, else ``projection_matrix``), and a ``camera_info`` message
+      as ``rostopic echo`` / ``ros2 topic echo`` print it (``K: [...]`` / ``k: [...]``).
+      Distortion coefficients are ignored: the depth is taken as rectified.
+    - Open3D's ``PinholeCameraIntrinsic`` JSON (``intrinsic_matrix``, 9 values, column-major,
+      as ``open3d.io.write_pinhole_camera_intrinsic`` writes it).
+    - Text (``.txt``): 9 numbers are a 3x3 ``K``, 12 a 3x4 ``P`` (row-major), 4 or 5 the 3F2N
+      dataset's ``params.txt`` (``fx fy cx cy [N]`` on MATLAB's 1-based grid: 1 is
+      subtracted from ``cx, cy``).
+
+    This is the one reader of camera files; dataset readers with such a file (e.g. a folder
+    of depth images beside an ``intrinsics.json``) can call it too.
+
+    Returns
+    -------
+    CameraFile
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    ValueError
+        An unreadable file, or values that are not a camera; the message names the file and
+        shows a valid example.
     """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"intrinsics file {path} does not exist")
     suffix = path.suffix.lower()
-    text = path.read_text()
+    try:
+        text = path.read_text()
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not a text file; {_INTRINSICS_EXAMPLE}") from exc
+    if suffix == ".txt":
+        return CameraFile(_text_camera(path, text), source=path)
     if suffix == ".json":
         try:
             data = json.loads(text)
@@ -157,50 +381,127 @@ def read_intrinsics(path: str | Path) -> Intrinsics:
             data = yaml.safe_load(text)
         except yaml.YAMLError as exc:
             raise ValueError(f"{path}: not valid YAML ({exc}); {_INTRINSICS_EXAMPLE}") from exc
-    elif suffix == ".txt":
-        values = text.split()
-        try:
-            fx, fy, cx, cy = (float(x) for x in values[:4])
-        except ValueError as exc:
-            raise ValueError(f"{path}: expected 'fx fy cx cy [N]' (3F2N params.txt)") from exc
-        return Intrinsics(fx, fy, cx - 1.0, cy - 1.0)
     else:
-        raise ValueError(f"{path}: intrinsics must be .json, .yaml/.yml or 3F2N params.txt")
-    if isinstance(data, dict):
-        for key in ("camera", "intrinsics"):
-            if isinstance(data.get(key), dict):
-                data = data[key]
-        try:
-            if "K" in data:
-                return as_intrinsics(np.asarray(data["K"], dtype=np.float64).reshape(3, 3))
-            if all(k in data for k in ("fx", "fy", "cx", "cy")):
-                return as_intrinsics(data)
-        except (ValueError, TypeError) as exc:
-            raise type(exc)(f"{path}: {exc}; {_INTRINSICS_EXAMPLE}") from exc
-    raise ValueError(f"{path}: needs keys fx, fy, cx, cy or K (3x3); {_INTRINSICS_EXAMPLE}")
+        raise ValueError(f"{path}: intrinsics must be .json, .yaml/.yml or .txt (3x3 K, 3x4 P or "
+                         "3F2N params.txt)")
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: needs keys fx, fy, cx, cy or K (3x3); {_INTRINSICS_EXAMPLE}")
+    try:
+        return _mapping_camera(data, path)
+    except (ValueError, TypeError) as exc:
+        raise type(exc)(f"{path}: {exc}; {_INTRINSICS_EXAMPLE}") from exc
+
+
+def _text_camera(path: Path, text: str) -> Intrinsics:
+    try:
+        values = [float(x) for x in text.replace(",", " ").replace(";", " ").split()]
+    except ValueError as exc:
+        raise ValueError(f"{path}: expected numbers only: 9 (a 3x3 K), 12 (a 3x4 P) or 4-5 "
+                         "(3F2N params.txt: fx fy cx cy [N])") from exc
+    try:
+        if len(values) == 9:
+            return as_intrinsics(np.reshape(values, (3, 3)))
+        if len(values) == 12:
+            return as_intrinsics(np.reshape(values, (3, 4)))
+        if len(values) in (4, 5):
+            fx, fy, cx, cy = values[:4]
+            return Intrinsics(fx, fy, cx - 1.0, cy - 1.0)
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"{path}: {exc}") from exc
+    raise ValueError(f"{path} holds {len(values)} numbers; a text camera file holds 9 (a 3x3 K, "
+                     "row-major), 12 (a 3x4 P) or 4-5 (3F2N params.txt: fx fy cx cy [N], 1-based)")
+
+
+def _matrix(value: Any) -> np.ndarray:
+    if isinstance(value, dict) and "data" in value:  # ROS camera_calibration_parsers
+        value = value["data"]
+    m = np.asarray(value, dtype=np.float64)
+    if m.size == 9:
+        return m.reshape(3, 3)
+    if m.size == 12:
+        return m.reshape(3, 4)
+    raise ValueError(f"a camera matrix holds 9 (3x3) or 12 (3x4) numbers; got {m.size}")
+
+
+def _mapping_camera(data: dict, path: Path) -> CameraFile:
+    extras = dict(data)
+    for key in ("camera", "intrinsics"):
+        if isinstance(data.get(key), dict):
+            data = data[key]
+            extras.update({k: v for k, v in data.items() if k in ("depth_scale", "invalid", "max_depth")})
+    if "intrinsic_matrix" in data:  # Open3D PinholeCameraIntrinsic: column-major
+        m = np.asarray(data["intrinsic_matrix"], dtype=np.float64)
+        if m.size != 9:
+            raise ValueError(f"intrinsic_matrix holds {m.size} numbers; Open3D writes 9 (column-major)")
+        K = as_intrinsics(m.reshape(3, 3).T)
+    else:
+        found = next((k for k in ("K", "k", "camera_matrix", "P", "p", "projection_matrix") if k in data),
+                     None)
+        if found is not None:
+            K = as_intrinsics(_matrix(data[found]))
+        elif all(k in data for k in ("fx", "fy", "cx", "cy")):
+            K = as_intrinsics(data)
+        else:
+            raise ValueError("needs keys fx, fy, cx, cy or K (3x3) (or P (3x4), camera_matrix (ROS), "
+                             "intrinsic_matrix (Open3D))")
+    scale = extras.get("depth_scale")
+    if scale is not None:
+        scale = check_positive(scale, '"depth_scale"')
+    invalid = extras.get("invalid", ())
+    if isinstance(invalid, (int, float)) and not isinstance(invalid, bool):
+        invalid = [invalid]
+    if not isinstance(invalid, (list, tuple)):
+        raise ValueError(f"invalid must be a list of raw depth values, e.g. [0, 65535]; got {invalid!r}")
+    codes = tuple(_finite(c, '"invalid"') for c in invalid)
+    max_depth = extras.get("max_depth")
+    if max_depth is not None:
+        max_depth = check_positive(max_depth, '"max_depth"')
+    return CameraFile(K, scale, codes, max_depth, path)
+
+
+def read_intrinsics(path: str | Path) -> Intrinsics:
+    """Read camera intrinsics from any file :func:`read_camera_file` reads (its ``K``)."""
+    return read_camera_file(path).K
 
 
 _INTRINSICS_EXAMPLE = ('a valid file looks like {"fx": 525.0, "fy": 525.0, "cx": 319.5, '
                        '"cy": 239.5} (pixels, 0-based principal point) or {"K": [[525.0, 0, '
-                       '319.5], [0, 525.0, 239.5], [0, 0, 1]]}')
+                       '319.5], [0, 525.0, 239.5], [0, 0, 1]]}, optionally with "depth_scale", '
+                       '"invalid" and "max_depth"')
 
 
-def normals_to_rgb8(normals: np.ndarray) -> np.ndarray:
-    """8-bit colour picture of a normal map: RGB = (1 - n) / 2 * 255, black where invalid.
+def normals_to_rgb8(normals: np.ndarray, *, convention: str = "3f2n") -> np.ndarray:
+    """8-bit colour picture of a normal map, black where invalid.
 
-    The ``(1 - n) / 2`` mapping (of the 3F2N papers) shows a camera-facing wall light blue.
+    Parameters
+    ----------
+    normals : array (H, W, 3)
+    convention : {"3f2n", "open3d"}
+        ``"3f2n"`` (default): ``RGB = (1 - n) / 2 * 255``, the 3F2N papers' colouring (a
+        camera-facing wall, n = (0, 0, -1), is light blue (128, 128, 255)). ``"open3d"``:
+        ``RGB = (n + 1) / 2 * 255``, the usual colouring of Open3D and most viewers (the same
+        wall is (128, 128, 0)).
     """
+    if convention not in VIS_CONVENTIONS:
+        raise ValueError(f"unknown colour convention {convention!r}; use one of {', '.join(VIS_CONVENTIONS)}")
     n = check_normals(normals)
     ok = np.all(np.isfinite(n), axis=-1)
-    rgb = np.clip((1.0 - np.nan_to_num(n)) * 0.5 * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    m = np.nan_to_num(n)
+    m = (1.0 - m) if convention == "3f2n" else (m + 1.0)
+    rgb = np.clip(m * 0.5 * 255.0 + 0.5, 0, 255).astype(np.uint8)
     rgb[~ok] = 0
     return rgb
 
 
-def write_normals(path: str | Path, normals: np.ndarray) -> None:
+#: Output suffixes of a normal map (:func:`write_normals`) and of a point cloud (:func:`write_ply`).
+OUTPUT_SUFFIXES = (".npy", ".png", ".vis.png", ".ply")
+
+
+def write_normals(path: str | Path, normals: np.ndarray, *, vis: str = "3f2n") -> None:
     """Write a normal map: ``.npy`` (float32), ``.png`` (16-bit, see module doc); atomic.
 
-    A name ending in ``.vis.png`` writes the 8-bit picture of :func:`normals_to_rgb8` instead.
+    A name ending in ``.vis.png`` writes the 8-bit picture of :func:`normals_to_rgb8` instead
+    (colouring ``vis``: ``"3f2n"`` or ``"open3d"``).
     """
     path = Path(path)
     n = check_normals(normals)
@@ -209,14 +510,15 @@ def write_normals(path: str | Path, normals: np.ndarray) -> None:
         with atomic_write(path) as fh:
             np.save(fh, n.astype(np.float32))
     elif name.endswith(".vis.png"):
-        write_png(path, normals_to_rgb8(n))
+        write_png(path, normals_to_rgb8(n, convention=vis))
     elif name.endswith(".png"):
         ok = np.all(np.isfinite(n), axis=-1)
         enc = np.clip(np.round((np.nan_to_num(n) + 1.0) * 0.5 * 65535.0), 0, 65535).astype(np.uint16)
         enc[~ok] = 0
         write_png(path, enc)
     else:
-        raise ValueError(f"{path}: normals are written as .npy, .png (16-bit) or .vis.png (8-bit picture)")
+        raise ValueError(f"{path}: normals are written as .npy, .png (16-bit) or .vis.png (8-bit "
+                         "picture); a point cloud as .ply (write_ply)")
 
 
 def read_normals(path: str | Path) -> np.ndarray:

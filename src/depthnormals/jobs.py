@@ -11,14 +11,26 @@ library's threads, one frame per thread, or on a Dask cluster.
 Output names: a depth file keeps its path relative to the folder it was found in (the
 folder given, the fixed part of a glob pattern, or its own folder), with the suffix of the
 output format; a dataset frame is written as ``<group>/<name>``. Two inputs mapping to the
-same output are refused.
+same output are refused. Files that a folder or a glob brings in but that are no depth
+images (colour PNGs, (H, W, 3) arrays: :func:`depthnormals.io.not_depth_reason`) are skipped
+and counted (:attr:`RunSummary.not_depth`); a file named on its own is always read.
+
+The manifest: every output folder holds :data:`MANIFEST` (``depthnormals-manifest.json``),
+what its normals were made with (:func:`manifest_settings`: method, options, depth scale,
+invalid codes, maximum depth, intrinsics, format, colouring) and the library version. A
+rerun with other settings is refused before any work (:class:`SettingsMismatch`, which says
+what differs and how to recompute: ``resume=False`` / ``--no-resume``); outputs found in a
+folder without a manifest are recomputed, never taken as done. A run that fails before it
+writes any frame leaves no manifest, and no output folder it created itself.
 """
 
 from __future__ import annotations
 
 import glob
+import json
+import shutil
 import time
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -27,10 +39,14 @@ from typing import Any
 import numpy as np
 
 from .camera import Intrinsics, as_intrinsics
-from .io import DEPTH_SUFFIXES
+from .io import DEPTH_SUFFIXES, VIS_CONVENTIONS, not_depth_reason
 
-__all__ = ["FORMATS", "EstimateJob", "EstimateSettings", "RunSummary", "estimate_job", "plan_estimate",
-           "run_estimate"]
+__all__ = ["FORMATS", "MANIFEST", "EstimateJob", "EstimateSettings", "RunSummary", "SettingsMismatch",
+           "estimate_job", "manifest_settings", "plan_estimate", "run_estimate"]
+
+#: The manifest file of an output folder (see the module docstring).
+MANIFEST = "depthnormals-manifest.json"
+_MANIFEST_FORMAT = "depthnormals-estimate"
 
 #: Output formats of the many-frames form (the suffix of each output file).
 FORMATS = ("npy", "png", "vis.png", "ply")
@@ -39,11 +55,19 @@ _MAGIC = set("*?[")
 
 @dataclass(frozen=True)
 class EstimateSettings:
-    """What every frame of a run shares: the method, its options, and the input scale."""
+    """What every frame of a run shares: the method, its options, how depth files are read
+    (scale, invalid raw codes, maximum depth in metres) and the ``.vis.png`` colouring."""
 
     method: str
     options: Mapping[str, Any] = field(default_factory=dict)
     depth_scale: float | None = None
+    invalid: tuple[float, ...] = ()
+    max_depth: float | None = None
+    vis: str = "3f2n"
+
+
+class SettingsMismatch(ValueError):
+    """An output folder holds normals made with other settings (see the module docstring)."""
 
 
 @dataclass(frozen=True)
@@ -74,12 +98,16 @@ class EstimateJob:
 
 @dataclass(frozen=True)
 class RunSummary:
-    """What :func:`run_estimate` did: frames planned, computed now, found done, seconds."""
+    """What :func:`run_estimate` did: frames planned, computed now, found done, seconds;
+    ``not_depth``: the (file, reason) pairs skipped as no depth image; ``no_normal``: the
+    outputs written now that hold no finite normal (all NaN)."""
 
     planned: int
     written: int
     skipped: int
     seconds: float
+    not_depth: tuple[tuple[str, str], ...] = ()
+    no_normal: tuple[str, ...] = ()
 
 
 def _is_glob(text: str) -> bool:
@@ -126,7 +154,8 @@ def _stem(rel: Path) -> str:
 
 
 def plan_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, K: Any = None,
-                  fmt: str = "npy") -> Iterator[EstimateJob]:
+                  fmt: str = "npy",
+                  on_skip: Callable[[Path, str], None] | None = None) -> Iterator[EstimateJob]:
     """The frames of ``inputs`` with their output paths under ``out_dir`` (lazily).
 
     Parameters
@@ -141,6 +170,9 @@ def plan_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, K: Any =
         Camera of the depth files (required when there are any).
     fmt : {"npy", "png", "vis.png", "ply"}
         Output format.
+    on_skip : callable, optional
+        ``on_skip(path, reason)`` for each file of a folder or glob that is no depth image
+        (it is left out).
 
     Yields
     ------
@@ -171,6 +203,16 @@ def plan_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, K: Any =
         seen[output] = origin
         return EstimateJob(output=output, **kw)
 
+    def depth_only(paths: Iterable[Path]) -> list[Path]:
+        kept = []
+        for p in paths:
+            reason = not_depth_reason(p)
+            if reason is None:
+                kept.append(p)
+            elif on_skip is not None:
+                on_skip(p, reason)
+        return kept
+
     def files(paths: Iterable[Path], root: Path) -> Iterator[EstimateJob]:
         if cam is None:
             raise ValueError("depth files need the camera: pass --intrinsics/-K (K=...)")
@@ -186,7 +228,11 @@ def plan_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, K: Any =
                            if Path(p).is_file() and Path(p).suffix.lower() in DEPTH_SUFFIXES)
             if not found:
                 raise FileNotFoundError(f"{text} matches no depth file ({', '.join(DEPTH_SUFFIXES)})")
-            yield from files(found, _glob_root(text))
+            kept = depth_only(found)
+            if not kept:
+                raise ValueError(f"{text} matches {len(found)} file(s), none of them a depth image "
+                                 "(colour images or other arrays)")
+            yield from files(kept, _glob_root(text))
         elif path.is_file():
             yield from files([path], path.parent)
         elif path.is_dir():
@@ -196,7 +242,11 @@ def plan_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, K: Any =
                 if not found:
                     raise ValueError(f"{path} holds no dataset this library reads and no depth file "
                                      f"({', '.join(DEPTH_SUFFIXES)})")
-                yield from files(found, path)
+                kept = depth_only(found)
+                if not kept:
+                    raise ValueError(f"{path} holds {len(found)} file(s) with a depth suffix, none of "
+                                     "them a depth image (colour images or other arrays)")
+                yield from files(kept, path)
                 continue
             for f in frames:
                 rel = f"{f.group}/{f.name}" if f.group else f.name
@@ -206,40 +256,120 @@ def plan_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, K: Any =
             raise FileNotFoundError(f"input {text} does not exist")
 
 
-def _write(path: Path, normals: np.ndarray, depth: np.ndarray, K: Intrinsics) -> None:
+def _write(path: Path, normals: np.ndarray, depth: np.ndarray, K: Intrinsics, vis: str = "3f2n") -> None:
     from . import io
 
     if path.name.lower().endswith(".ply"):
-        write_ply = getattr(io, "write_ply", None)
-        if write_ply is None:
-            raise ValueError("PLY output needs depthnormals.io.write_ply, which this version lacks")
-        write_ply(path, depth, K, normals)
+        io.write_ply(path, depth, K, normals)
     else:
-        io.write_normals(path, normals)
+        io.write_normals(path, normals, vis=vis)
 
 
-def estimate_job(job: EstimateJob, settings: EstimateSettings) -> str:
-    """Read, estimate and write one frame (atomically); returns the output path.
+def estimate_job(job: EstimateJob, settings: EstimateSettings) -> tuple[str, int]:
+    """Read, estimate and write one frame (atomically); returns the output path and its
+    number of finite normals (0: all NaN).
 
-    The unit of work of :func:`run_estimate`, run on a worker thread or a Dask worker.
+    The unit of work of :func:`run_estimate`, run on a worker thread or a Dask worker. An
+    error names the input file.
     """
     from .io import read_depth
-    from .registry import estimate_normals
+    from .registry import compute_normals
 
     if job.source is not None:
-        depth = read_depth(job.source, depth_scale=settings.depth_scale)
+        depth = read_depth(job.source, depth_scale=settings.depth_scale, invalid=settings.invalid,
+                           max_depth=settings.max_depth)
     else:
         depth = job.depth
-    normals = estimate_normals(depth, job.K, method=settings.method, **dict(settings.options))
+        if settings.max_depth is not None:
+            depth = np.where(depth > settings.max_depth, np.nan, depth).astype(depth.dtype)
+    try:
+        normals = compute_normals(depth, job.K, method=settings.method, **dict(settings.options))
+    except (ValueError, TypeError) as exc:
+        where = str(job.source) if job.source is not None else job.label
+        if where in str(exc):
+            raise
+        raise type(exc)(f"{where}: {exc}") from exc
     job.output.parent.mkdir(parents=True, exist_ok=True)
-    _write(job.output, normals, depth, job.K)
-    return str(job.output)
+    _write(job.output, normals, depth, job.K, settings.vis)
+    return str(job.output), int(np.count_nonzero(np.isfinite(normals[..., 0])))
+
+
+def manifest_settings(settings: EstimateSettings, K: Any, fmt: str) -> dict[str, Any]:
+    """The settings a manifest records and a resumed run must match: method, options, depth
+    scale, invalid codes, maximum depth, intrinsics (None: each dataset frame's own),
+    output format and, for ``vis.png``, the colouring."""
+    cam = None if K is None else as_intrinsics(K)
+    return {
+        "method": settings.method,
+        "options": json.loads(json.dumps(dict(settings.options), sort_keys=True, default=repr)),
+        "depth_scale": settings.depth_scale,
+        "invalid": [float(c) for c in settings.invalid],
+        "max_depth": settings.max_depth,
+        "intrinsics": None if cam is None else {"fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy},
+        "format": fmt,
+        "vis": settings.vis if fmt == "vis.png" else None,
+    }
+
+
+def _read_manifest(path: Path) -> dict[str, Any] | None:
+    if not path.is_file():
+        return None
+    try:
+        data = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError, OSError) as exc:
+        raise SettingsMismatch(f"{path} is not a readable manifest ({exc}); delete it and pass "
+                               "--no-resume (resume=False) to recompute the folder") from exc
+    if not isinstance(data, dict) or data.get("format") != _MANIFEST_FORMAT:
+        raise SettingsMismatch(f"{path} is not a depthnormals estimate manifest; use another output "
+                               "folder")
+    return data
+
+
+def _differences(old: Mapping[str, Any], new: Mapping[str, Any]) -> str:
+    keys = [k for k in new if old.get(k) != new[k]] + [k for k in old if k not in new]
+    return "; ".join(f"{k} {json.dumps(old.get(k))} before, {json.dumps(new.get(k))} now" for k in keys)
+
+
+def _check_manifest(out: Path, wanted: dict[str, Any], resume: bool) -> bool:
+    """Refuse a resumed run into a folder made with other settings; True when the folder's
+    manifest matches (its outputs may be skipped)."""
+    old = _read_manifest(out / MANIFEST)
+    if old is None:
+        return False
+    if old.get("settings") == wanted:
+        return True
+    if resume:
+        diff = _differences(old.get("settings") or {}, wanted)
+        raise SettingsMismatch(
+            f"{out} holds normals made with other settings ({diff}); "
+            "to recompute every frame with the new settings pass --no-resume (resume=False), or write "
+            "to another output folder")
+    return False
+
+
+def _write_manifest(out: Path, settings: dict[str, Any]) -> None:
+    from . import __version__
+    from .io import write_bytes_atomic
+
+    data = {"format": _MANIFEST_FORMAT, "manifest_version": 1, "library_version": __version__,
+            "settings": settings}
+    write_bytes_atomic(out / MANIFEST, (json.dumps(data, indent=2) + "\n").encode())
+
+
+def _remove_run_traces(out: Path, created: bool) -> None:
+    """After a run that wrote no frame: its manifest, and the folder if this run created it
+    (only when nothing but empty folders is left in it)."""
+    (out / MANIFEST).unlink(missing_ok=True)
+    if created and out.is_dir() and not any(p.is_file() for p in out.rglob("*")):
+        shutil.rmtree(out, ignore_errors=True)
 
 
 def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: str, K: Any = None,
                  options: Mapping[str, Any] | None = None, depth_scale: float | None = None,
                  fmt: str = "npy", resume: bool = True, progress: bool = False,
-                 scheduler: str | None = None, batch_size: int = 16, client: Any = None) -> RunSummary:
+                 scheduler: str | None = None, batch_size: int = 16, client: Any = None,
+                 invalid: Sequence[float] = (), max_depth: float | None = None,
+                 vis: str = "3f2n") -> RunSummary:
     """Estimate the normals of every frame of ``inputs`` into ``out_dir``.
 
     Parameters
@@ -253,8 +383,9 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
     depth_scale : float, optional
         Metres per unit of integer depth files (e.g. 0.001 for millimetre PNGs).
     resume : bool, default True
-        Skip frames whose output exists (complete: every output is written atomically);
-        False recomputes and replaces them.
+        Skip frames whose output exists and whose folder's manifest holds the same settings
+        (complete: every output is written atomically); a folder made with other settings
+        raises :class:`SettingsMismatch`. False recomputes and replaces every output.
     progress : bool, default False
         Progress on stderr (:class:`depthnormals.cluster.Progress`).
     scheduler : str, optional
@@ -265,43 +396,86 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
         Frames per Dask task.
     client : distributed.Client, optional
         An open client to use instead of ``scheduler``.
+    invalid : sequence of numbers, optional
+        Raw values of depth files that mark invalid pixels (e.g. ``(65535,)``).
+    max_depth : float, optional
+        Depth beyond this many metres is invalid.
+    vis : {"3f2n", "open3d"}
+        Colouring of ``vis.png`` outputs (:func:`depthnormals.io.normals_to_rgb8`).
 
     Returns
     -------
     RunSummary
+
+    Raises
+    ------
+    SettingsMismatch
+        ``out_dir`` holds normals made with other settings and ``resume`` is True.
     """
     from ._progress import Progress
+    from ._validate import check_choice, check_positive
     from .cluster import connect, map_batches
     from .registry import get_estimator
 
     get_estimator(method[:-1] if method.endswith("+") else method)  # a bad name fails before any work
-    settings = EstimateSettings(method, dict(options or {}), depth_scale)
+    check_choice(vis, "vis", VIS_CONVENTIONS)
+    if fmt not in FORMATS:
+        raise ValueError(f"output format {fmt!r} not known; use one of {', '.join(FORMATS)}")
+    settings = EstimateSettings(method, dict(options or {}), depth_scale, tuple(float(c) for c in invalid),
+                                check_positive(max_depth, "max_depth", allow_none=True), vis)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"output {out} exists and is not a folder")
+    wanted = manifest_settings(settings, K, fmt)
+    trusted = _check_manifest(out, wanted, resume) if out.is_dir() else False
+    created = not out.exists()
+    # fresh: nothing in the folder yet, so the manifest goes in before the first frame and an
+    # interrupted run resumes; otherwise (outputs of other or unknown settings) every frame is
+    # recomputed and the manifest is written once all are, so no old output passes for new
+    fresh = created or not any(p.is_file() for p in out.rglob("*"))
+    if not trusted and not fresh:
+        (out / MANIFEST).unlink(missing_ok=True)
     t0 = time.perf_counter()
-    counts = {"planned": 0, "skipped": 0}
+    counts = {"planned": 0, "skipped": 0, "written": 0}
+    not_depth: list[tuple[str, str]] = []
+    no_normal: list[str] = []
 
     def todo() -> Iterator[EstimateJob]:
-        for job in plan_estimate(inputs, out, K=K, fmt=fmt):
+        for job in plan_estimate(inputs, out, K=K, fmt=fmt,
+                                 on_skip=lambda p, why: not_depth.append((str(p), why))):
             counts["planned"] += 1
-            if resume and job.output.is_file():
+            if resume and trusted and job.output.is_file():
                 counts["skipped"] += 1
                 bar.update(f"{job.label} (done before)")
                 continue
+            if fresh and counts["planned"] - counts["skipped"] == 1:  # the first frame to compute
+                out.mkdir(parents=True, exist_ok=True)
+                _write_manifest(out, wanted)
             yield job
 
     func = partial(estimate_job, settings=settings)
-    with Progress("estimate", unit="frame", enabled=progress) as bar:
-        def on_done(job: EstimateJob, _: str) -> None:
-            bar.update(job.label)
+    try:
+        with Progress("estimate", unit="frame", enabled=progress) as bar:
+            def on_done(job: EstimateJob, result: tuple[str, int]) -> None:
+                counts["written"] += 1
+                if result[1] == 0:
+                    no_normal.append(result[0])
+                bar.update(job.label)
 
-        if client is not None:
-            results = map_batches(func, todo(), client=client, batch_size=batch_size, on_done=on_done)
-        elif scheduler is not None:
-            with connect(scheduler) as cl:
-                results = map_batches(func, todo(), client=cl, batch_size=batch_size, on_done=on_done)
-        else:
-            results = map_batches(func, todo(), on_done=on_done)
+            if client is not None:
+                results = map_batches(func, todo(), client=client, batch_size=batch_size, on_done=on_done)
+            elif scheduler is not None:
+                with connect(scheduler) as cl:
+                    results = map_batches(func, todo(), client=cl, batch_size=batch_size, on_done=on_done)
+            else:
+                results = map_batches(func, todo(), on_done=on_done)
+    except BaseException:
+        if fresh and counts["written"] == 0:
+            _remove_run_traces(out, created)
+        raise
     if counts["planned"] == 0:
         raise ValueError(f"the inputs {', '.join(map(str, inputs))} hold no frame")
-    return RunSummary(counts["planned"], len(results), counts["skipped"], time.perf_counter() - t0)
+    if not trusted and not fresh:
+        _write_manifest(out, wanted)
+    return RunSummary(counts["planned"], len(results), counts["skipped"], time.perf_counter() - t0,
+                      tuple(not_depth), tuple(sorted(no_normal)))

@@ -14,6 +14,7 @@ Adding an estimator: write its function in ``estimators/<file>.py``, export it f
 from __future__ import annotations
 
 import inspect
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -21,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from . import ddm
+from ._validate import NoValidNormalWarning, check_depth, no_valid_normal_message
 from .ddm.threefn_plus import fused_plus as _fused_3f2n_plus
 from .estimators import (
     angle_weighted,
@@ -42,7 +44,7 @@ from .estimators import (
     vector_svd,
 )
 
-__all__ = ["EstimatorInfo", "estimate_normals", "get_estimator", "methods", "register"]
+__all__ = ["EstimatorInfo", "compute_normals", "estimate_normals", "get_estimator", "methods", "register"]
 
 DEFAULT_METHOD = "3f2n+"
 
@@ -172,22 +174,29 @@ def _split_options(method: str, info: EstimatorInfo, options: dict[str, Any],
 
 
 def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
-                     depth_scale: float | None = None, **options: Any) -> np.ndarray:
+                     depth_scale: float | None = None, stack: bool | None = None,
+                     **options: Any) -> np.ndarray:
     """Surface normals from a depth image by any registered estimator.
 
     Parameters
     ----------
-    depth : array_like, shape (H, W) or (N, H, W)
+    depth : array_like, shape (H, W), (H, W, 1) or (N, H, W)
         Planar depth z. float32/float64; integers need ``depth_scale``. Invalid depth
         (0, negative, NaN, inf) gives a NaN normal. A stack of N frames is spread over the
         threads, one frame per thread (:func:`depthnormals.batch.estimate_normals_batch`).
-    K : Intrinsics, array (3, 3) or (fx, fy, cx, cy); for a stack also (N, 3, 3) or N of those
-        Camera intrinsics in pixels, 0-based pixel centres.
+    K : Intrinsics, array (3, 3) or (3, 4), (fx, fy, cx, cy), mapping, or Open3D intrinsics
+        Camera intrinsics in pixels, 0-based pixel centres (:func:`depthnormals.as_intrinsics`);
+        for a stack also (N, 3, 3) or N of those.
     method : str
         A name from :func:`methods`; ``"<name>+"`` adds the discontinuity discrimination
         module of 3F2N+ after estimator ``<name>``.
     depth_scale : float, optional
         Metres per unit of integer depth (e.g. 0.001 for millimetres).
+    stack : bool, optional
+        How a 3-D ``depth`` is read. None (default): ``(H, W, 1)`` is one single-channel
+        image; ``(H, W, 3)`` and ``(H, W, 4)`` are refused as colour images (ValueError);
+        any other ``(N, H, W)`` is a stack of N frames. True: a 3-D ``depth`` is always a
+        stack (N frames of width 3 or 4, or 1, included). False: one image only.
     **options
         Keyword options of the chosen estimator (and, for ``"<name>+"``, of
         :func:`depthnormals.ddm.discontinuity_discrimination`). Unknown names raise TypeError.
@@ -198,6 +207,12 @@ def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
         Unit normals in the OpenCV camera frame facing the camera (``dot(n, X) < 0``),
         NaN where no estimate is possible.
 
+    Warns
+    -----
+    NoValidNormalWarning
+        (a ``RuntimeWarning``) when the output, or a frame of a stack, holds no finite
+        normal: no valid depth, or no valid pixel with a valid neighbour (a 1x1 image).
+
     Examples
     --------
     >>> import numpy as np, depthnormals as dn
@@ -207,11 +222,54 @@ def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
     """
     if not isinstance(method, str):
         raise TypeError(f"method must be a string; got {type(method).__name__}")
-    if np.ndim(depth) == 3:  # a stack of frames (N, H, W): one frame per thread
+    if stack is not None and not isinstance(stack, bool):
+        raise TypeError(f"stack must be True, False or None; got {stack!r}")
+    ndim = np.ndim(depth)
+    if stack and ndim != 3:
+        raise ValueError(f"stack=True needs a 3-D depth (N, H, W); got shape {np.shape(depth)}")
+    if ndim == 3 and _is_stack(np.shape(depth), stack):
         from .batch import estimate_normals_batch
 
-        return estimate_normals_batch(estimate_normals, depth, K, method=method, depth_scale=depth_scale,
-                                      **options)
+        out = estimate_normals_batch(compute_normals, depth, K, method=method, depth_scale=depth_scale,
+                                     **options)
+        empty = [i for i in range(out.shape[0]) if not np.isfinite(out[i, ..., 0]).any()]
+        if empty:
+            shown = ", ".join(map(str, empty[:10])) + (", ..." if len(empty) > 10 else "")
+            warnings.warn(f"{len(empty)} of {out.shape[0]} frames of the stack hold no finite normal "
+                          f"(frames {shown}): no valid depth, or no valid pixel with a valid neighbour",
+                          NoValidNormalWarning, stacklevel=2)
+        return out
+    out = compute_normals(depth, K, method=method, depth_scale=depth_scale, **options)
+    if not np.isfinite(out[..., 0]).any():
+        z = check_depth(depth, depth_scale=depth_scale)
+        warnings.warn(no_valid_normal_message(z), NoValidNormalWarning, stacklevel=2)
+    return out
+
+
+def _is_stack(shape: tuple[int, ...], stack: bool | None) -> bool:
+    """Whether a 3-D depth of ``shape`` is a stack of frames (see ``estimate_normals``'s ``stack``)."""
+    if stack is not None:
+        if not stack and shape[-1] != 1:
+            raise ValueError(f"depth must be a 2-D array (H, W) or (H, W, 1) with stack=False; "
+                             f"got shape {shape}")
+        return stack
+    if shape[-1] in (3, 4):
+        raise ValueError(
+            f"depth must be a 2-D array (H, W) or a stack (N, H, W); got shape {shape}, which looks "
+            f"like a colour image ({shape[-1]} channels); pass the depth image itself, or "
+            f"stack=True if these are {shape[0]} depth frames of {shape[1]} x {shape[2]} pixels")
+    return shape[-1] != 1
+
+
+def compute_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
+                    depth_scale: float | None = None, **options: Any) -> np.ndarray:
+    """One frame (H, W) or (H, W, 1) by ``method``: :func:`estimate_normals` without its stack
+    dispatch and without the all-NaN warning (front ends that report it their own way: the
+    command line's exit status 3, a stack's one warning)."""
+    if not isinstance(method, str):
+        raise TypeError(f"method must be a string; got {type(method).__name__}")
+    if np.ndim(depth) == 3 and np.shape(depth)[-1] == 1:  # a single-channel image (H, W, 1)
+        depth = np.asarray(depth)[..., 0]
     if method.endswith("+") and method[:-1] in _REGISTRY:
         base = method[:-1]
         info = _REGISTRY[base]

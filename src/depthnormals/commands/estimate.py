@@ -9,6 +9,7 @@ when the input has no valid depth).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 from dataclasses import dataclass
@@ -16,6 +17,9 @@ from pathlib import Path
 from typing import Any
 
 HELP = "estimate the normals of depth images and write them (.npy, .png 16-bit, .vis.png, .ply)"
+
+#: Output suffixes of the one-file form, and what each holds.
+OUTPUTS = ".npy (float32), .png (16-bit), .vis.png (8-bit picture) or .ply (point cloud with normals)"
 
 #: Exit status when no pixel of the input depth is valid (see ``depthnormals --help``).
 EXIT_NO_VALID_PIXEL = 3
@@ -28,15 +32,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="depth file: .npy, .png (16-bit), .tif, .bin; or many: files, globs "
                              "('seq/*.png'), folders, dataset folders (then -o is a folder)")
     parser.add_argument("--intrinsics", "-K", type=Path, default=None,
-                        help="intrinsics file: .json/.yaml (fx, fy, cx, cy or K) or 3F2N params.txt "
-                             "(required for depth files; dataset folders bring their own)")
+                        help="camera file: .json/.yaml (fx, fy, cx, cy, K or P; ROS camera_info; Open3D "
+                             "intrinsic_matrix; optional depth_scale, invalid, max_depth) or .txt (3x3 K, "
+                             "3x4 P, or 3F2N params.txt) (required for depth files; dataset folders "
+                             "bring their own)")
     parser.add_argument("-o", "--output", type=Path, required=True,
                         help="output: .npy (float32), .png (16-bit), .vis.png (8-bit picture) or .ply "
                              "(point cloud with normals); "
                              "with many inputs, a folder")
     parser.add_argument("--method", "-m", default=None, help="estimator (see `depthnormals methods`)")
     parser.add_argument("--depth-scale", type=float, default=None,
-                        help="metres per unit of integer depth (e.g. 0.001 for millimetres)")
+                        help="metres per unit of integer depth (e.g. 0.001 for millimetres); default "
+                             "the camera file's depth_scale")
+    parser.add_argument("--invalid", type=parse_codes, default=None, metavar="V[,V...]",
+                        help="raw depth values that mark invalid pixels, e.g. 65535 or 0,2047 (default "
+                             "the camera file's invalid list; 0, NaN and inf are always invalid)")
+    parser.add_argument("--max-depth", type=float, default=None, metavar="METRES",
+                        help="depth beyond this is invalid (default the camera file's max_depth, else none)")
+    parser.add_argument("--vis", default="3f2n", choices=("3f2n", "open3d"),
+                        help=".vis.png colouring: 3f2n = (1 - n) / 2 (default, the 3F2N papers'), "
+                             "open3d = (n + 1) / 2 (Open3D's and most viewers')")
     parser.add_argument("--shape", type=parse_shape, default=None, metavar="H,W",
                         help="rows,columns of a raw .bin depth file (default 480,640, the 3F2N "
                              "format); for other formats it must match the file")
@@ -67,6 +82,15 @@ def parse_shape(text: str) -> tuple[int, int]:
     return h, w
 
 
+def parse_codes(text: str) -> tuple[float, ...]:
+    """``"0,65535"`` -> ``(0.0, 65535.0)``: the raw values of ``--invalid``."""
+    try:
+        return tuple(float(x) for x in text.split(",") if x.strip())
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(
+            f"--invalid must be comma-separated numbers, e.g. 65535 or 0,2047; got {text!r}") from exc
+
+
 def parse_options(items: list[str]) -> dict:
     """``["a=1", "b=sobel"]`` -> ``{"a": 1, "b": "sobel"}`` (values parsed as JSON when possible)."""
     out = {}
@@ -87,21 +111,57 @@ def _many(args: argparse.Namespace) -> bool:
             or args.scheduler is not None or any(c in str(args.depth[0]) for c in "*?["))
 
 
+@dataclass(frozen=True)
+class ReadSettings:
+    """How depth files are read: the command line's values, else the camera file's."""
+
+    depth_scale: float | None
+    invalid: tuple[float, ...]
+    max_depth: float | None
+
+
+def read_settings(args: argparse.Namespace, camera: Any) -> ReadSettings:
+    """``--depth-scale`` / ``--invalid`` / ``--max-depth``, each defaulting to the camera
+    file's ``depth_scale`` / ``invalid`` / ``max_depth`` (:func:`depthnormals.io.read_camera_file`)."""
+    from .._validate import check_positive
+
+    scale = args.depth_scale if args.depth_scale is not None else getattr(camera, "depth_scale", None)
+    invalid = args.invalid if args.invalid is not None else getattr(camera, "invalid", ())
+    max_depth = args.max_depth if args.max_depth is not None else getattr(camera, "max_depth", None)
+    check_positive(scale, "--depth-scale", allow_none=True)
+    check_positive(max_depth, "--max-depth", allow_none=True)
+    return ReadSettings(scale, tuple(invalid), max_depth)
+
+
 def run_many(args: argparse.Namespace) -> int:
-    from ..io import read_intrinsics
+    from ..io import read_camera_file
     from ..jobs import run_estimate
     from ..registry import DEFAULT_METHOD
 
     if args.output.suffix.lower() in (".npy", ".png", ".ply") and not args.output.is_dir():
         raise ValueError(f"with many inputs (or --scheduler), -o is a folder; got the file name "
                          f"{args.output} (choose the format with --format)")
-    K = read_intrinsics(args.intrinsics) if args.intrinsics is not None else None
+    camera = read_camera_file(args.intrinsics) if args.intrinsics is not None else None
+    rs = read_settings(args, camera)
     method = args.method or DEFAULT_METHOD
-    s = run_estimate(args.depth, args.output, method=method, K=K, options=parse_options(args.option),
-                     depth_scale=args.depth_scale, fmt=args.format, resume=not args.no_resume,
-                     progress=not args.quiet, scheduler=args.scheduler, batch_size=args.batch_size)
+    s = run_estimate(args.depth, args.output, method=method, K=None if camera is None else camera.K,
+                     options=parse_options(args.option), depth_scale=rs.depth_scale, fmt=args.format,
+                     resume=not args.no_resume, progress=not args.quiet, scheduler=args.scheduler,
+                     batch_size=args.batch_size, invalid=rs.invalid, max_depth=rs.max_depth, vis=args.vis)
     print(f"{args.output}: {s.planned} frames by {method} ({s.written} computed, {s.skipped} done "
           f"before) in {s.seconds:.1f} s")
+    if s.not_depth:
+        shown = "; ".join(f"{p}: {why}" for p, why in s.not_depth[:5])
+        more = f"; and {len(s.not_depth) - 5} more" if len(s.not_depth) > 5 else ""
+        print(f"depthnormals estimate: skipped {len(s.not_depth)} file(s) that are not depth images "
+              f"({shown}{more})", file=sys.stderr)
+    if s.no_normal:
+        n = len(s.no_normal)
+        shown = ", ".join(s.no_normal[:5]) + (f" and {n - 5} more" if n > 5 else "")
+        print(f"depthnormals estimate: warning: {len(s.no_normal)} output(s) hold no finite normal (all "
+              f"NaN: no valid depth, or no valid pixel with a valid neighbour): {shown}; check the files, "
+              "--depth-scale, --invalid and --max-depth", file=sys.stderr)
+        return EXIT_NO_VALID_PIXEL
     return 0
 
 
@@ -117,54 +177,97 @@ class EstimateReport:
     ms: float
 
 
+def check_output(output: Path) -> None:
+    """Refuse an output name whose format is unknown, before any work."""
+    name = output.name.lower()
+    if not name.endswith((".npy", ".png", ".ply")):
+        suffix = output.suffix or "(no suffix)"
+        raise ValueError(f"-o {output}: unknown output format {suffix!r}; use {OUTPUTS}")
+
+
 def estimate_file(depth_path: Path, intrinsics_path: Path, output: Path, *,
                   method: str | None = None, depth_scale: float | None = None,
                   shape: tuple[int, int] | None = None,
-                  options: dict[str, Any] | None = None) -> EstimateReport:
+                  options: dict[str, Any] | None = None, invalid: tuple[float, ...] = (),
+                  max_depth: float | None = None, vis: str = "3f2n") -> EstimateReport:
     """Read one depth file and its intrinsics, estimate the normals, write them atomically.
 
-    The normals are written even when no depth pixel is valid (then they are all NaN);
-    ``valid_depth == 0`` in the report says so.
+    The normals are written even when none is finite (``valid_normals == 0`` in the report
+    says so; ``valid_depth == 0`` when no depth pixel is valid). The output's folder is
+    created when missing, and removed again when the write fails.
     """
     import time
 
     import numpy as np
 
     from ..io import read_depth, read_intrinsics, write_normals, write_ply
-    from ..registry import DEFAULT_METHOD, estimate_normals
+    from ..registry import DEFAULT_METHOD, compute_normals
 
-    depth = read_depth(depth_path, depth_scale=depth_scale, shape=shape)
+    check_output(output)
+    depth = read_depth(depth_path, depth_scale=depth_scale, shape=shape, invalid=invalid,
+                       max_depth=max_depth)
     if shape is not None and depth.shape != tuple(shape):
         raise ValueError(f"{depth_path} holds a {depth.shape[0]} x {depth.shape[1]} depth map; "
                          f"--shape says {shape[0]} x {shape[1]}")
     K = read_intrinsics(intrinsics_path)
     method = method or DEFAULT_METHOD
     t0 = time.perf_counter()
-    normals = estimate_normals(depth, K, method=method, **(options or {}))
+    try:
+        normals = compute_normals(depth, K, method=method, **(options or {}))
+    except (ValueError, TypeError) as exc:
+        raise type(exc)(f"{depth_path}: {exc}") from exc
     ms = (time.perf_counter() - t0) * 1e3
-    if output.suffix.lower() == ".ply":  # a point cloud: valid points with their normals
-        write_ply(output, depth, K, normals)
-    else:
-        write_normals(output, normals)
+    created = _make_parents(output.parent)
+    try:
+        if output.name.lower().endswith(".ply"):  # a point cloud: valid points with their normals
+            write_ply(output, depth, K, normals)
+        else:
+            write_normals(output, normals, vis=vis)
+    except BaseException:
+        for folder in reversed(created):
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        raise
     valid_depth = int(np.count_nonzero(np.isfinite(depth) & (depth > 0)))
     valid = int(np.count_nonzero(np.isfinite(normals[..., 0])))
     return EstimateReport(output, depth.shape, method, valid_depth, valid, ms)
 
 
+def _make_parents(folder: Path) -> list[Path]:
+    """Create ``folder`` and its missing parents; returns those created, outermost first."""
+    missing = []
+    p = folder
+    while not p.exists() and p != p.parent:
+        missing.append(p)
+        p = p.parent
+    folder.mkdir(parents=True, exist_ok=True)
+    return list(reversed(missing))
+
+
 def run(args: argparse.Namespace) -> int:
+    from ..io import read_camera_file
+
     if _many(args):
         return run_many(args)
     args.depth = args.depth[0]
     if args.intrinsics is None:
         raise ValueError("--intrinsics/-K is required for a depth file")
+    check_output(args.output)
+    rs = read_settings(args, read_camera_file(args.intrinsics))
     rep = estimate_file(args.depth, args.intrinsics, args.output, method=args.method,
-                        depth_scale=args.depth_scale, shape=args.shape,
-                        options=parse_options(args.option))
+                        depth_scale=rs.depth_scale, shape=args.shape,
+                        options=parse_options(args.option), invalid=rs.invalid, max_depth=rs.max_depth,
+                        vis=args.vis)
     print(f"{rep.output}: {rep.shape[1]}x{rep.shape[0]} normals by {rep.method} "
           f"({rep.valid_normals} valid pixels, {rep.ms:.1f} ms)")
-    if rep.valid_depth == 0:
-        print(f"depthnormals estimate: warning: no pixel of {args.depth} holds a valid depth "
-              "(all are 0, negative, NaN or inf), so every normal is NaN; check the file, "
-              "--depth-scale and --shape", file=sys.stderr)
+    if rep.valid_normals == 0:
+        if rep.valid_depth == 0:
+            why = (f"no pixel of {args.depth} holds a valid depth (all are 0, negative, NaN or inf, "
+                   "or removed by --invalid / --max-depth)")
+        else:
+            why = (f"{args.depth} has {rep.valid_depth} valid depth pixel(s), but none has a valid "
+                   f"neighbour ({rep.shape[0]} x {rep.shape[1]} pixels)")
+        print(f"depthnormals estimate: warning: {why}, so every normal is NaN (written to {rep.output}); "
+              "check the file, --depth-scale and --shape", file=sys.stderr)
         return EXIT_NO_VALID_PIXEL
     return 0
