@@ -259,9 +259,7 @@ class _Tally:
 def _estimate(spec: MethodSpec, frame: Frame, warmed: set[str]) -> tuple[np.ndarray, float]:
     """The estimate of one method on one frame and its wall time in ms (compilation excluded:
     a method not in ``warmed`` first runs on a small crop, then joins it)."""
-    # compute_normals: estimate_normals without its all-NaN warning (a frame, or the warm-up
-    # crop, without valid depth is scored with coverage 0, not warned about)
-    from ..registry import compute_normals as estimate_normals
+    from ..registry import estimate_normals
 
     if spec.label not in warmed:
         crop = np.ascontiguousarray(frame.depth[:_WARMUP_PX, :_WARMUP_PX])
