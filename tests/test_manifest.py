@@ -1,0 +1,131 @@
+"""Every output knows how it was made: never "done before" for different work.
+
+`depthnormals estimate` writes a manifest per output folder and refuses a resumed run with
+other settings (saying how to force it); `evaluate` keys each stored part by its settings
+(a rerun recomputes what differs); `synth` refuses a folder made with other settings.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from depthnormals import jobs
+from depthnormals._png import encode_png
+from depthnormals.analytic import make_scene
+from depthnormals.cli import main
+
+K = (50.0, 50.0, 23.5, 17.5)
+
+
+@pytest.fixture
+def folder(tmp_path):
+    """Three 16-bit millimetre PNGs and a camera file."""
+    z = make_scene("sphere-before-wall").render(K=K, shape=(36, 48)).depth
+    (tmp_path / "in").mkdir()
+    for i in range(3):
+        mm = np.round(z * 1000 * (1 + 0.01 * i)).astype(np.uint16)
+        (tmp_path / "in" / f"{i}.png").write_bytes(encode_png(mm))
+    (tmp_path / "k.json").write_text(json.dumps(dict(zip(("fx", "fy", "cx", "cy"), K, strict=True))))
+    return tmp_path
+
+
+def _run(folder, *extra):
+    return main(["estimate", str(folder / "in"), "-K", str(folder / "k.json"), "-o", str(folder / "out"),
+                 "--depth-scale", "0.001", "-q", *extra])
+
+
+def test_rerun_with_another_method_is_refused_and_says_how_to_force(folder, capsys):
+    assert _run(folder) == 0
+    first = {p.name: p.read_bytes() for p in (folder / "out").glob("*.npy")}
+    capsys.readouterr()
+    assert _run(folder, "-m", "fals") == 1
+    err = capsys.readouterr().err
+    assert "other settings" in err and '"3f2n+" before, "fals" now' in err and "--no-resume" in err
+    assert {p.name: p.read_bytes() for p in (folder / "out").glob("*.npy")} == first  # untouched
+    assert _run(folder, "-m", "fals", "--no-resume") == 0
+    assert "3 frames by fals (3 computed, 0 done before)" in capsys.readouterr().out
+    assert all(first[p.name] != p.read_bytes() for p in (folder / "out").glob("*.npy"))
+    assert _run(folder, "-m", "fals") == 0       # the same settings now: resumed
+    assert "(0 computed, 3 done before)" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("extra", [("--depth-scale", "0.002"), ("--option", "aggregate=mean"),
+                                   ("--max-depth", "5"), ("--invalid", "65535"), ("--format", "png")])
+def test_any_other_setting_is_refused(folder, capsys, extra):
+    assert _run(folder) == 0
+    capsys.readouterr()
+    argv = ["estimate", str(folder / "in"), "-K", str(folder / "k.json"), "-o", str(folder / "out"), "-q",
+            "--depth-scale", "0.001", *extra]
+    assert main(argv) == 1
+    assert "other settings" in capsys.readouterr().err
+
+
+def test_other_intrinsics_are_refused(folder, capsys):
+    assert _run(folder) == 0
+    (folder / "k.json").write_text(json.dumps({"fx": 60.0, "fy": 60.0, "cx": 23.5, "cy": 17.5}))
+    capsys.readouterr()
+    assert _run(folder) == 1
+    assert "intrinsics" in capsys.readouterr().err
+
+
+def test_manifest_records_how_the_outputs_were_made(folder):
+    import depthnormals as dn
+
+    assert _run(folder, "--option", "kernel=sobel", "-m", "3f2n") == 0
+    data = json.loads((folder / "out" / jobs.MANIFEST).read_text())
+    assert data["library_version"] == dn.__version__
+    assert data["settings"] == {
+        "method": "3f2n", "options": {"kernel": "sobel"}, "depth_scale": 0.001, "invalid": [],
+        "max_depth": None, "intrinsics": {"fx": 50.0, "fy": 50.0, "cx": 23.5, "cy": 17.5},
+        "format": "npy", "vis": None}
+
+
+def test_outputs_without_a_manifest_are_recomputed(folder, capsys):
+    """Outputs of unknown provenance (an older version, another tool) are never 'done'."""
+    out = folder / "out"
+    out.mkdir()
+    for i in range(3):
+        np.save(out / f"{i}.npy", np.zeros((36, 48, 3), np.float32))
+    assert _run(folder) == 0
+    assert "(3 computed, 0 done before)" in capsys.readouterr().out
+    assert np.isfinite(np.load(out / "0.npy")).any()
+    assert (out / jobs.MANIFEST).is_file()
+
+
+def test_api_raises_settings_mismatch(folder):
+    files = sorted((folder / "in").glob("*.png"))
+    jobs.run_estimate(files, folder / "o", method="d2nt", K=K, depth_scale=0.001)
+    with pytest.raises(jobs.SettingsMismatch, match="resume=False"):
+        jobs.run_estimate(files, folder / "o", method="d2nt", K=K, depth_scale=0.002)
+    s = jobs.run_estimate(files, folder / "o", method="d2nt", K=K, depth_scale=0.002, resume=False)
+    assert (s.written, s.skipped) == (3, 0)
+
+
+def test_evaluate_rerun_with_another_protocol_recomputes(tmp_path, capsys):
+    from depthnormals.synth import generate
+
+    generate(tmp_path / "ds", indoor=1, outdoor=0, views=2, size=(30, 40), noise=(),
+             K=(22.0, 22.0, 19.5, 14.5), progress=False, scenes="procedural")
+    base = ["evaluate", str(tmp_path / "ds"), "-m", "d2nt", "-o", str(tmp_path / "ev"), "-q",
+            "--figures", "0"]
+    assert main(base) == 0
+    assert "(2 computed, 0 reused" in capsys.readouterr().out
+    assert main([*base, "--border", "3"]) == 0
+    assert "(2 computed, 0 reused" in capsys.readouterr().out
+    assert main([*base, "--border", "3"]) == 0
+    assert "(0 computed, 2 reused" in capsys.readouterr().out
+    assert main([*base, "--option", "d2nt:variant=mnr", "--border", "3"]) == 0
+    assert "(2 computed, 0 reused" in capsys.readouterr().out
+
+
+def test_synth_rerun_with_other_settings_is_refused(tmp_path, capsys):
+    base = ["synth", str(tmp_path / "s"), "--indoor", "1", "--outdoor", "0", "--views", "1", "--width",
+            "48", "--height", "36", "--noise", "none", "--scenes", "procedural", "--no-progress"]
+    assert main(base) == 0
+    capsys.readouterr()
+    assert main([*base, "--seed", "1"]) == 1
+    err = capsys.readouterr().err
+    assert "other settings" in err and "another output folder" in err
