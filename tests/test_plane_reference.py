@@ -58,6 +58,30 @@ def test_exact_box_on_floor():
         assert np.median(np.abs(X @ ref.normals[k] + ref.offsets[k])) < 1e-6
 
 
+def test_small_faces_take_back_their_band():
+    """A low box on the floor: its front face (2812 px) and top (1334 px) are too small to be
+    references, but as competitors they take back the band of the floor's threshold that
+    climbs them; without them the floor's interior holds 228 px of the box face (90 deg)."""
+    import depthnormals.evaluate._planes as planes
+    from depthnormals.analytic import Box, Plane, Scene
+
+    r = Scene([Plane((0.0, -1.0, 0.0), -1.0), Plane((0.0, 0.0, -1.0), -6.0),
+               Box((0.0, 0.9, 3.0), (0.2, 0.1, 0.2))]).render()
+    ref = plane_reference(r.depth, r.K)
+    assert ref.n_planes == 2  # floor and wall
+    err = angular_error(r.normals, ref.normal_map())
+    assert not (ref.interior & (err > 1.0)).any()
+    assert score_planes(r.normals, ref)["interior_mean"] < 1e-6
+    old = planes.COMPETITOR_FRACTION
+    try:
+        planes.COMPETITOR_FRACTION = 0.01  # no competitors below the reference size
+        worse = plane_reference(r.depth, r.K)
+    finally:
+        planes.COMPETITOR_FRACTION = old
+    err = angular_error(r.normals, worse.normal_map())
+    assert (worse.interior & (err > 1.0)).sum() > 100
+
+
 def test_sphere_is_not_a_plane():
     r = make_scene("demo-room").render()
     ref = plane_reference(r.depth, r.K)

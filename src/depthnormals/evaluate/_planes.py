@@ -38,6 +38,19 @@ THRESHOLD_Z2_PER_M = 0.005
 #: this. Points spread uniformly across the band give 1/sqrt(3) = 0.58 (a curved surface
 #: filling the band); a Kinect staircase gives about 0.15, its noise 0.3 - 0.4.
 MAX_RMS_RATIO = 0.45
+#: Planes down to this share of the image (768 px at 640 x 480) are extracted as
+#: *competitors*: they are no references, but they take back the pixels of their surface that
+#: lie inside a larger plane's threshold band (a box side standing on the floor: at 3 m the
+#: floor's band climbs about 10 px up the side). At most COMPETITORS_PER_PLANE * max_planes
+#: planes are extracted.
+COMPETITOR_FRACTION = 0.0025
+#: Rounds of reassignment and refits after the extraction.
+REASSIGN_ROUNDS = 3
+#: Two planes at more than this angle both fitting a pixel within their thresholds: the pixel
+#: is on their crease and is no reference (nearly coplanar planes, e.g. one floor split in two
+#: regions, share their pixels without a gap).
+AMBIGUOUS_DEG = 10.0
+COMPETITORS_PER_PLANE = 4
 #: The threshold for LiDAR depth, whose noise does not grow with z^2: 5 cm everywhere, 2.5
 #: times the 2 cm range accuracy of a Velodyne HDL-64E (the densified KITTI frames add
 #: interpolation between scan lines). :func:`sensor_threshold` picks it for a sensor text
@@ -235,6 +248,7 @@ class _Params:
     floor_m: float
     z2_per_m: float
     min_pixels: int
+    min_competitor: int
     max_rms_ratio: float
     max_bend_ratio: float
     n_hyp: int
@@ -266,7 +280,8 @@ def _extract(pts: np.ndarray, thr: np.ndarray, valid: np.ndarray, p: _Params,
     remaining = valid.copy()
     found: list[tuple[np.ndarray, np.ndarray]] = []
     failures = 0
-    while len(found) < p.max_planes and failures < 5 and remaining.sum() >= p.min_pixels:
+    while (len(found) < COMPETITORS_PER_PLANE * p.max_planes and failures < 5
+           and remaining.sum() >= p.min_competitor):
         hyps = _hypotheses(pts, remaining, rng, p.n_hyp, p.radius)
         if len(hyps) == 0:
             failures += 1
@@ -276,7 +291,7 @@ def _extract(pts: np.ndarray, thr: np.ndarray, valid: np.ndarray, p: _Params,
         best = hyps[_best_hypothesis(hyps, pts.reshape(-1, 3)[pick], thr.reshape(-1)[pick])]
         region, plane = _grow(pts, thr, remaining, best, p.refits)
         remaining &= ~region
-        if region.sum() < p.min_pixels or not _flat(pts, thr, region, plane, p):
+        if region.sum() < p.min_competitor or not _flat(pts, thr, region, plane, p):
             failures += 1
             continue
         failures = 0
@@ -327,28 +342,57 @@ def _bend_ratio(pts: np.ndarray, thr: np.ndarray, region: np.ndarray, plane: np.
 
 
 def _reassign(pts: np.ndarray, thr: np.ndarray, valid: np.ndarray,
-              found: list[tuple[np.ndarray, np.ndarray]], p: _Params) -> np.ndarray:
-    """Labels (H, W): each pixel near a plane's region goes to the plane it fits best.
+              found: list[tuple[np.ndarray, np.ndarray]], p: _Params
+              ) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Labels (H, W) and refitted planes: each pixel near a region goes to the plane it fits
+    best, crease pixels that fit two planes go to none.
 
     A plane extracted first also takes the band of a neighbouring plane that lies within its
-    threshold (a wall's foot in the floor's band). Here every pixel within ``p.radius`` px of
-    a region and inside that plane's threshold joins the plane of the smallest
-    ``residual / threshold``; then each plane keeps its largest connected part.
+    threshold (a wall's foot in the floor's band). For REASSIGN_ROUNDS rounds: every valid
+    pixel within ``p.radius`` px of a region and inside that plane's threshold is a candidate
+    of the plane; it joins the candidate plane of the smallest ``residual / threshold``, unless
+    a second candidate plane, at more than AMBIGUOUS_DEG to the first, fits it within its
+    threshold too (the pixel lies on the crease of the two: its reference is ambiguous); each
+    plane keeps its largest connected part and is refitted to it.
     """
     h, w = valid.shape
-    best = np.full((h, w), np.inf)
+    regions = [r for r, _ in found]
+    planes = [pl for _, pl in found]
     labels = np.full((h, w), -1, np.int32)
-    for k, (region, plane) in enumerate(found):
-        with np.errstate(invalid="ignore"):
-            ratio = np.abs(pts @ plane[:3] + plane[3]) / thr
-        cand = valid & _dilate(region, p.radius) & (ratio <= 1.0) & (ratio < best)
-        best[cand] = ratio[cand]
-        labels[cand] = k
-    out = np.full((h, w), -1, np.int32)
-    for k in range(len(found)):
-        part = _largest_component(labels == k)
-        out[part] = k
-    return out
+    for _ in range(REASSIGN_ROUNDS):
+        best = np.full((h, w), np.inf)
+        second = np.full((h, w), np.inf)
+        labels = np.full((h, w), -1, np.int32)
+        second_label = np.full((h, w), -1, np.int32)
+        for k, (region, plane) in enumerate(zip(regions, planes, strict=True)):
+            with np.errstate(invalid="ignore"):
+                ratio = np.abs(pts @ plane[:3] + plane[3]) / thr
+            cand = valid & _dilate(region, p.radius) & (ratio <= 1.0)
+            better = cand & (ratio < best)
+            demoted = better & (labels >= 0)
+            second[demoted] = best[demoted]
+            second_label[demoted] = labels[demoted]
+            runner = cand & ~better & (ratio < second)
+            second[runner] = ratio[runner]
+            second_label[runner] = k
+            best[better] = ratio[better]
+            labels[better] = k
+        normals = np.array([pl[:3] for pl in planes])
+        both = (labels >= 0) & (second_label >= 0)
+        cosang = np.einsum("ij,ij->i", normals[labels[both]], normals[second_label[both]])
+        crease = np.zeros((h, w), bool)
+        crease[both] = cosang < np.cos(np.radians(AMBIGUOUS_DEG))
+        labels[crease] = -1
+        out = np.full((h, w), -1, np.int32)
+        for k in range(len(planes)):
+            part = _largest_component(labels == k)
+            out[part] = k
+            regions[k] = part
+            if part.sum() >= 3:
+                n, d = _fit_plane(pts[part])
+                planes[k] = np.append(n, d)
+        labels = out
+    return labels, planes
 
 
 def _check_params(threshold: Any, min_fraction: float, max_rms_ratio: float, hypotheses: int,
@@ -362,7 +406,9 @@ def _check_params(threshold: Any, min_fraction: float, max_rms_ratio: float, hyp
     check_real(z2, "threshold[1] (z2_per_m)", minimum=0.0)
     frac = check_real(min_fraction, "min_fraction", minimum=1e-6, maximum=1.0)
     h, w = shape
-    return _Params(floor_m=floor_m, z2_per_m=z2, min_pixels=max(50, round(frac * h * w)),
+    min_pixels = max(50, round(frac * h * w))
+    return _Params(floor_m=floor_m, z2_per_m=z2, min_pixels=min_pixels,
+                   min_competitor=min(min_pixels, max(30, round(COMPETITOR_FRACTION * h * w))),
                    max_rms_ratio=check_positive(max_rms_ratio, "max_rms_ratio"),
                    max_bend_ratio=MAX_BEND_RATIO,
                    n_hyp=check_int(hypotheses, "hypotheses", minimum=1, maximum=100_000),
@@ -445,15 +491,13 @@ def plane_reference(depth: Any, K: Any, *, depth_scale: float | None = None, see
     thr = _threshold(np.where(valid, pts[..., 2], 0.0), p.floor_m, p.z2_per_m)
     rng = np.random.default_rng(seed)
     found = _extract(pts, thr, valid, p, rng) if valid.sum() >= p.min_pixels else []
-    labels = _reassign(pts, thr, valid, found, p) if found else np.full(valid.shape, -1, np.int32)
+    labels, fitted = (_reassign(pts, thr, valid, found, p) if found
+                      else (np.full(valid.shape, -1, np.int32), []))
     planes, keep = [], []
-    for k in range(len(found)):
+    for k, plane in enumerate(fitted):
         region = labels == k
-        if region.sum() < p.min_pixels:
-            continue
-        n, d = _fit_plane(pts[region])
-        if _flat(pts, thr, region, np.append(n, d), p):
-            planes.append((n, d))
+        if region.sum() >= p.min_pixels and _flat(pts, thr, region, plane, p):
+            planes.append((plane[:3], float(plane[3])))
             keep.append(k)
     # relabel the survivors 0..P-1 in order
     remap = np.full(len(found) + 1, -1, np.int32)
@@ -485,6 +529,7 @@ def _assemble(pts: np.ndarray, thr: np.ndarray, labels: np.ndarray,
             bend_ratio=_bend_ratio(pts, thr, region, np.append(n, d)),
             median_depth=float(np.median(q[:, 2])), incidence_deg=float(inc)))
     settings = {"threshold": [p.floor_m, p.z2_per_m], "min_pixels": p.min_pixels,
+                "min_competitor_pixels": p.min_competitor,
                 "max_rms_ratio": p.max_rms_ratio, "hypotheses": p.n_hyp,
                 "sample_points": p.n_sample, "radius_px": p.radius, "refits": p.refits,
                 "max_planes": p.max_planes, "interior_px": p.interior_px, "seed": seed}
