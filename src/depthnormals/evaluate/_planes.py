@@ -432,16 +432,20 @@ def plane_reference(depth: Any, K: Any, *, depth_scale: float | None = None, see
        (the sensor's noise and disparity steps grow with ``z^2``: :data:`THRESHOLD_Z2_PER_M`).
     2. Its largest 8-connected image region of inlier pixels, refitted by total least squares
        (PCA of the region's points), three times.
-    3. Kept if the region holds at least ``min_fraction`` of the image (3072 px at 640 x 480)
-       and the RMS of residual / threshold is at most ``max_rms_ratio``; its pixels leave the
-       pool either way. Extraction stops after five rejections in a row, at ``max_planes``,
-       or when fewer pixels than the minimum region remain.
+    3. Kept if the region holds at least :data:`COMPETITOR_FRACTION` of the image (768 px at
+       640 x 480), the RMS of residual / threshold is at most ``max_rms_ratio`` and the
+       residuals have no quadratic trend (:data:`MAX_BEND_RATIO`: a curved surface); its
+       pixels leave the pool either way. Extraction stops after five rejections in a row, at
+       ``4 max_planes`` planes, or when fewer pixels than that minimum remain.
 
-    Then each pixel within the sampling radius of a kept region and inside that plane's
-    threshold goes to the plane it fits best (relative to the threshold), so a plane found
-    first does not keep the foot of its neighbour; each plane keeps its largest connected part
-    and is refitted once more; planes whose region fell below the minimum size or fails the
-    residual tests now are dropped.
+    Then three rounds of reassignment: each valid pixel within the sampling radius of a region
+    and inside that plane's threshold goes to the plane it fits best (relative to the
+    threshold), so a plane found first does not keep the band of its neighbour that lies
+    within its threshold; a pixel that two planes more than 10 deg apart both fit is on their
+    crease and goes to none; each plane keeps its largest connected part and is refitted. The
+    references are the planes whose region holds at least ``min_fraction`` of the image (3072
+    px at 640 x 480) and passes the residual tests again; the smaller ones served as
+    competitors only.
 
     Parameters
     ----------
@@ -465,7 +469,7 @@ def plane_reference(depth: Any, K: Any, *, depth_scale: float | None = None, see
     hypotheses : int, default 256
         RANSAC hypotheses per plane.
     max_planes : int, default 20
-        Most planes extracted.
+        Planes extracted: at most four times this (competitors included).
     interior_px : int, default 5
         Pixels at chessboard distance >= this from the region's outside are its interior,
         closer ones its rim.
