@@ -317,3 +317,12 @@ def test_cli_reference_planes(tmp_path, capsys):
     assert "| cam | 3f2n |" in text and "interior (deg)" in text
     assert (tmp_path / "o" / "planes.json").is_file()
     assert not (tmp_path / "o" / "figures").exists()
+
+
+def test_cli_without_truth_points_to_planes(tmp_path, capsys):
+    from depthnormals import cli
+
+    folder, _ = _sensor_folder(tmp_path)
+    rc = cli.main(["evaluate", str(folder), "-m", "3f2n", "-o", str(tmp_path / "o"), "-q"])
+    assert rc != 0
+    assert "--reference planes" in capsys.readouterr().err

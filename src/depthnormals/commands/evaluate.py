@@ -117,11 +117,25 @@ def run_planes(args: argparse.Namespace) -> int:
     return 0
 
 
+def _require_truth(dataset: Path) -> None:
+    """A dataset without ground-truth normals (real sensors, TUM, ...) needs ``--reference
+    planes``; say so before any estimate runs."""
+    from .. import datasets
+
+    if not dataset.exists():
+        return  # run_evaluation reports the missing path
+    first = next(iter(datasets.open(dataset)), None)
+    if first is not None and first.normals is None:
+        raise ValueError(f"{dataset} has no ground-truth normals ({first.meta.get('format', '?')} "
+                         "layout); score it against its planes with --reference planes")
+
+
 def run(args: argparse.Namespace) -> int:
     from ..evaluate import Protocol, run_evaluation, summary_markdown
 
     if getattr(args, "reference", "gt") == "planes":
         return run_planes(args)
+    _require_truth(args.dataset)
 
     protocol = Protocol(folded=args.errors == "folded", border=args.border, invalid=args.invalid,
                         edge_radius=args.edge_radius, edge_angle=args.edge_angle,
