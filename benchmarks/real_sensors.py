@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -178,6 +179,22 @@ def _table(acc: dict, labels: list[str], key: str, scale: float = 1.0, digits: i
     return "\n".join(lines)
 
 
+def _git_state() -> str:
+    """HEAD and whether src/ has uncommitted changes (the estimators change under work)."""
+    import subprocess
+
+    repo = Path(__file__).resolve().parents[1]
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=repo, text=True,
+                              capture_output=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "src"], cwd=repo,
+                               text=True, capture_output=True, check=True).stdout.split("\n")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    changed = [line[3:] for line in dirty if line.strip()]
+    return head + (f" + uncommitted {', '.join(changed)}" if changed else "")
+
+
 def main(argv: list[str] | None = None) -> int:
     from depthnormals.commands.bench import machine
 
@@ -198,7 +215,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"unknown method(s) {', '.join(unknown)}; use {', '.join(METHODS)}")
     if not args.root.is_dir():
         parser.error(f"{args.root} does not exist")
-    print(f"machine: {machine()}; plane reference seed {args.seed}; {args.root}")
+    print(f"machine: {machine()}; plane reference seed {args.seed}; {args.root}; "
+          f"git {_git_state()}")
     acc = accuracy(args.root, labels, args.seed)
     print("\nplanes per folder: " + ", ".join(f"{g} {acc[g]['planes']}" for g in acc))
     print("\n### interior mean error (deg), >= 5 px inside the planes\n")
@@ -222,7 +240,11 @@ def main(argv: list[str] | None = None) -> int:
         ratios = [r["ratio_cpu"] for r in timing]
         print(f"\nmedian ratio (cpu) {np.median(ratios):.2f}, range {min(ratios):.2f}-{max(ratios):.2f}")
     if args.json is not None:
-        args.json.write_text(json.dumps({"machine": machine(), "methods": labels,
+        args.json.write_text(json.dumps({"machine": machine(), "git": _git_state(),
+                                         "command": "python benchmarks/real_sensors.py "
+                                                    + " ".join(argv if argv is not None
+                                                               else sys.argv[1:]),
+                                         "methods": labels,
                                          "seed": args.seed, "accuracy": acc, "speed": timing},
                                         indent=2, default=float) + "\n")
     return 0
