@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from ._png import encode_png, read_png
+from ._png import decode_png, encode_png, read_png
 from ._validate import check_depth, check_normals, check_positive
 from .camera import Intrinsics, as_intrinsics
 
@@ -47,6 +47,8 @@ __all__ = [
 DEPTH_SUFFIXES = (".npy", ".png", ".tif", ".tiff", ".bin", ".pgm")
 #: Colourings of the 8-bit ``.vis.png`` picture (:func:`normals_to_rgb8`).
 VIS_CONVENTIONS = ("3f2n", "open3d")
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+_PNG_IEND = b"\x00\x00\x00\x00IEND\xaeB`\x82"
 #: Larger depth images than this many pixels are refused (a corrupt header, not a sensor).
 MAX_PIXELS = 1 << 28
 
@@ -136,7 +138,10 @@ def read_depth(path: str | Path, *, depth_scale: float | None = None,
         arr = _read_npy(path)
     elif suffix == ".png":
         try:
-            arr = read_png(path)
+            data = path.read_bytes()
+            if data[:8] == _PNG_SIGNATURE and _PNG_IEND not in data[-24:]:
+                raise ValueError("it is truncated (no IEND chunk at its end)")
+            arr = decode_png(data, name=str(path))
         except (ValueError, struct.error, IndexError, zlib.error, MemoryError) as exc:
             raise ValueError(f"{path} is not a readable PNG: {_reason(exc, path)}") from exc
     elif suffix == ".pgm":
@@ -208,8 +213,8 @@ def _npy_header(path: Path) -> tuple[tuple[int, ...], np.dtype]:
             else:
                 shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
             offset = fh.tell()
-    except (ValueError, OSError, EOFError, SyntaxError, TypeError) as exc:
-        raise ValueError(f"{path} is not a readable .npy file: {exc}") from exc
+    except Exception as exc:  # a corrupt header fails in numpy's parser in many ways
+        raise ValueError(f"{path} is not a readable .npy file: {exc or type(exc).__name__}") from exc
     if dtype.hasobject:
         raise ValueError(f"{path} holds Python objects (dtype {dtype}); a depth .npy holds numbers")
     count = math.prod(shape)
