@@ -222,15 +222,18 @@ def train_and_predict(
 def pose_scores(
     Rp: np.ndarray, tp: np.ndarray, views: dict, eval_pts: np.ndarray, diameters: np.ndarray
 ) -> dict[str, float]:
-    """ADD accuracy (< 10 % diameter), mean ADD (mm), rotation (deg) and translation (mm) errors."""
+    """ADD accuracy (< 10 % diameter), mean ADD (mm), rotation (deg) and translation (mm) errors,
+    and the ADD accuracy of the predicted rotation with the true translation (the rotation's share)."""
     R, t, obj = views["R"].astype(np.float64), views["t"].astype(np.float64), views["obj"]
     p = eval_pts[obj]  # (N, P, 3)
     add = np.linalg.norm(p @ (Rp - R).transpose(0, 2, 1) + (tp - t)[:, None], axis=2).mean(1)
     cos = (np.einsum("nij,nij->n", Rp, R) - 1) / 2
     rot = np.degrees(np.arccos(np.clip(cos, -1, 1)))
     tra = np.linalg.norm(tp - t, axis=1)
+    add_r = np.linalg.norm(p @ (Rp - R).transpose(0, 2, 1), axis=2).mean(1)  # the true translation
     return {
         "add_acc": float(np.mean(add < 0.1 * diameters[obj])),
+        "add_acc_true_t": float(np.mean(add_r < 0.1 * diameters[obj])),
         "add_mm": float(1000 * add.mean()),
         "rot_deg": float(rot.mean()),
         "rot_median_deg": float(np.median(rot)),
@@ -245,7 +248,9 @@ METRICS = (
     ("add_acc", "ADD acc %", 100.0),
     ("add_mm", "mean ADD mm", 1.0),
     ("rot_deg", "rot err deg", 1.0),
+    ("rot_median_deg", "median rot err deg", 1.0),
     ("trans_mm", "trans err mm", 1.0),
+    ("add_acc_true_t", "ADD acc, true t %", 100.0),
 )
 
 
@@ -254,7 +259,7 @@ def summarise(results: dict[str, dict[str, list[dict]]], errors: dict[str, float
     lines = [
         "| model | input | "
         + " | ".join(f"{h} (mean +- std)" for _, h, _ in METRICS)
-        + " | ADD acc per seed | p (acc) vs depth | normal err on object (deg) |",
+        + " | ADD acc per seed | p (ADD acc) vs rgb+depth or xyz+rgb | normal err on object (deg) |",
         "|---|---|" + "---:|" * len(METRICS) + "---|---:|---:|",
     ]
     pvals: dict[str, dict[str, float]] = {}
