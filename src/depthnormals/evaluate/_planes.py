@@ -44,6 +44,10 @@ MAX_RMS_RATIO = 0.45
 #: floor's band climbs about 10 px up the side). At most COMPETITORS_PER_PLANE * max_planes
 #: planes are extracted.
 COMPETITOR_FRACTION = 0.0025
+#: Extraction stops after this many rejected planes in a row.
+MAX_FAILURES = 5
+#: Hypotheses (the most inliers first) whose largest connected region is compared.
+TOP_HYPOTHESES = 8
 #: Rounds of reassignment and refits after the extraction.
 REASSIGN_ROUNDS = 3
 #: Two planes at more than this angle both fitting a pixel within their thresholds: the pixel
@@ -238,10 +242,23 @@ def _hypotheses(pts: np.ndarray, remaining: np.ndarray, rng: np.random.Generator
     return np.concatenate([n, -np.einsum("ij,ij->i", n, p0[ok])[:, None]], axis=1)
 
 
-def _best_hypothesis(hyps: np.ndarray, sample_pts: np.ndarray, sample_thr: np.ndarray) -> int:
-    """Index of the hypothesis with the most inliers among the sampled points."""
-    resid = np.abs(sample_pts @ hyps[:, :3].T + hyps[:, 3])
-    return int(np.argmax((resid <= sample_thr[:, None]).sum(axis=0)))
+def _best_hypothesis(pts: np.ndarray, thr: np.ndarray, remaining: np.ndarray, hyps: np.ndarray,
+                     pick: np.ndarray) -> np.ndarray:
+    """The hypothesis whose largest connected inlier region is largest, among the
+    TOP_HYPOTHESES with the most inliers in the sampled pixels ``pick``.
+
+    The inlier count alone favours planes that slice through many surfaces (a grazing plane
+    through the floor and the furniture tops); the connected region is what is kept.
+    """
+    resid = np.abs(pts.reshape(-1, 3)[pick] @ hyps[:, :3].T + hyps[:, 3])
+    counts = (resid <= thr.reshape(-1)[pick][:, None]).sum(axis=0)
+    top = np.argsort(-counts, kind="stable")[:TOP_HYPOTHESES]
+    sizes = []
+    for k in top:
+        with np.errstate(invalid="ignore"):
+            inl = remaining & (np.abs(pts @ hyps[k, :3] + hyps[k, 3]) <= thr)
+        sizes.append(int(_largest_component(inl).sum()))
+    return hyps[top[int(np.argmax(sizes))]]
 
 
 @dataclass(frozen=True)
@@ -281,7 +298,7 @@ def _extract(pts: np.ndarray, thr: np.ndarray, valid: np.ndarray, p: _Params,
     remaining = valid.copy()
     found: list[tuple[np.ndarray, np.ndarray]] = []
     failures = 0
-    while (len(found) < COMPETITORS_PER_PLANE * p.max_planes and failures < 5
+    while (len(found) < COMPETITORS_PER_PLANE * p.max_planes and failures < MAX_FAILURES
            and remaining.sum() >= p.min_competitor):
         hyps = _hypotheses(pts, remaining, rng, p.n_hyp, p.radius)
         if len(hyps) == 0:
@@ -289,7 +306,7 @@ def _extract(pts: np.ndarray, thr: np.ndarray, valid: np.ndarray, p: _Params,
             continue
         idx = np.flatnonzero(remaining)
         pick = idx[rng.choice(idx.size, min(p.n_sample, idx.size), replace=False)]
-        best = hyps[_best_hypothesis(hyps, pts.reshape(-1, 3)[pick], thr.reshape(-1)[pick])]
+        best = _best_hypothesis(pts, thr, remaining, hyps, pick)
         region, plane = _grow(pts, thr, remaining, best, p.refits)
         remaining &= ~region
         if region.sum() < p.min_competitor or not _flat(pts, thr, region, plane, p):
@@ -428,8 +445,9 @@ def plane_reference(depth: Any, K: Any, *, depth_scale: float | None = None, see
     Per plane, on the back-projected points of the pixels not yet taken:
 
     1. RANSAC: ``hypotheses`` planes through a random seed pixel and two pixels 1/3 to 1 times
-       ``0.06 min(H, W)`` px from it; the one with the most inliers among 4000 random points
-       wins. A point is an inlier within ``max(floor_m, z2_per_m * z^2)`` metres of the plane
+       ``0.06 min(H, W)`` px from it; of the :data:`TOP_HYPOTHESES` with the most inliers
+       among 4000 random points, the one with the largest connected inlier region wins. A
+       point is an inlier within ``max(floor_m, z2_per_m * z^2)`` metres of the plane
        (the sensor's noise and disparity steps grow with ``z^2``: :data:`THRESHOLD_Z2_PER_M`).
     2. Its largest 8-connected image region of inlier pixels, refitted by total least squares
        (PCA of the region's points), three times.
