@@ -96,8 +96,9 @@ def _noise(
     return np.where(np.isfinite(z) & (z > 0), z, 0.0)
 
 
-def render_view(name: str, rng: np.random.Generator, *, size: int, sensor: str) -> dict[str, Any]:
-    """One view of object ``name``: rgb, noisy depth, mask, pose, ground-truth normals."""
+def render_view(name: str, rng: np.random.Generator, *, size: int, sensor: str | None) -> dict[str, Any]:
+    """One view of object ``name``: rgb, noisy depth (clean for ``sensor=None``), mask, pose,
+    ground-truth normals."""
     from depthnormals.render import look_at, render_mesh
     from depthnormals.synth.meshes import box, merge, quad
 
@@ -134,7 +135,7 @@ def render_view(name: str, rng: np.random.Generator, *, size: int, sensor: str) 
     shade = np.clip(np.nan_to_num(r.normals) @ light, 0, None)
     rgb = np.where(valid[..., None], albedo[np.maximum(r.face, 0)] * (0.3 + 0.7 * shade[..., None]), 0.0)
     rgb = np.clip(rgb + rng.normal(0, 0.02, size=rgb.shape), 0, 1)
-    depth = _noise(sensor, r.depth, r.normals, K, rng)
+    depth = r.depth if sensor is None else _noise(sensor, r.depth, r.normals, K, rng)
     return {
         "rgb": rgb.transpose(2, 0, 1).astype(np.float32),
         "depth": depth.astype(np.float32),
@@ -153,8 +154,11 @@ def object_views(
     objects: tuple[str, ...] = OBJECTS,
     cache_dir: Path | None = None,
     log: Any = None,
+    noise: bool = True,
 ) -> dict[str, np.ndarray]:
     """``n`` views (object i mod len(objects), sensor i mod 3), cached in ``cache_dir``.
+
+    ``noise=False``: the same views with the renderer's exact depth (no sensor model).
 
     Returns
     -------
@@ -166,7 +170,8 @@ def object_views(
     """
     from depthnormals.io import atomic_write
 
-    key = json.dumps({"v": VERSION, "n": n, "seed": seed, "size": size, "objects": list(objects)})
+    spec = {"v": VERSION, "n": n, "seed": seed, "size": size, "objects": list(objects)}
+    key = json.dumps(spec if noise else {**spec, "noise": False})
     path = None
     if cache_dir is not None:
         cache_dir = Path(cache_dir)
@@ -182,7 +187,7 @@ def object_views(
     for i in range(n):
         rng = np.random.default_rng([seed, i])
         o, s = i % len(objects), i % len(SENSORS)
-        v = render_view(objects[o], rng, size=size, sensor=SENSORS[s])
+        v = render_view(objects[o], rng, size=size, sensor=SENSORS[s] if noise else None)
         for k in ("rgb", "depth", "mask", "R", "t", "normals"):
             out[k].append(v[k])
         out["obj"].append(o)

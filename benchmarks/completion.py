@@ -294,6 +294,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--epochs", type=int, default=10)
     p.add_argument("--seeds", type=int, default=3)
     p.add_argument("--inputs", default=",".join(INPUTS))
+    p.add_argument("--clean", action="store_true", help="exact rendered depth, no sensor noise")
     p.add_argument("--threads", type=int, default=1, help="torch and library threads (default 1)")
     p.add_argument(
         "--cache",
@@ -319,8 +320,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"[{time.perf_counter() - t0:7.1f} s] {msg}", flush=True)
 
     log(f"views: {args.train} train + {args.test} test, {args.size}x{args.size}, {len(objs.OBJECTS)} objects")
-    tr = objs.object_views(args.train, seed=0, size=args.size, cache_dir=args.cache, log=log)
-    te = objs.object_views(args.test, seed=1, size=args.size, cache_dir=args.cache, log=log)
+    tr = objs.object_views(
+        args.train, seed=0, size=args.size, cache_dir=args.cache, log=log, noise=not args.clean
+    )
+    te = objs.object_views(
+        args.test, seed=1, size=args.size, cache_dir=args.cache, log=log, noise=not args.clean
+    )
     K = objs.intrinsics(args.size)
     needed = sorted({normal_source(n) for n in names} - {None})
     n_tr = {m: objs.estimated_normals(tr["depth"], K, m) for m in needed}

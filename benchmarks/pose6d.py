@@ -353,6 +353,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--models", default="image,points")
     p.add_argument("--image-inputs", default=",".join(DEFAULT_IMAGE))
     p.add_argument("--point-inputs", default=",".join(POINT_INPUTS))
+    p.add_argument("--clean", action="store_true", help="exact rendered depth, no sensor noise")
     p.add_argument("--threads", type=int, default=1, help="torch and library threads (default 1)")
     p.add_argument(
         "--cache",
@@ -387,8 +388,12 @@ def main(argv: list[str] | None = None) -> int:
         f"views: {args.train} train + {args.test} test, {args.size}x{args.size}, "
         f"objects {', '.join(objs.OBJECTS)}"
     )
-    tr = objs.object_views(args.train, seed=0, size=args.size, cache_dir=args.cache, log=log)
-    te = objs.object_views(args.test, seed=1, size=args.size, cache_dir=args.cache, log=log)
+    tr = objs.object_views(
+        args.train, seed=0, size=args.size, cache_dir=args.cache, log=log, noise=not args.clean
+    )
+    te = objs.object_views(
+        args.test, seed=1, size=args.size, cache_dir=args.cache, log=log, noise=not args.clean
+    )
     K = objs.intrinsics(args.size)
     needed = {normal_source(n) for k in models for n in inputs[k]} - {None}
     n_tr = {m: objs.estimated_normals(tr["depth"], K, m) for m in sorted(needed)}

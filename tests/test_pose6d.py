@@ -47,6 +47,9 @@ def test_views_are_consistent_and_cached(bench, tmp_path):
     again = objs.object_views(3, seed=4, size=32, cache_dir=tmp_path)   # from the cache
     assert all(np.array_equal(v[k], again[k], equal_nan=k == "normals") for k in v)
     assert len(list(tmp_path.glob("views-*.npz"))) == 1
+    clean = objs.object_views(3, seed=4, size=32, noise=False)  # same poses, exact depth
+    assert np.array_equal(clean["R"], v["R"]) and np.array_equal(clean["mask"], v["mask"])
+    assert (clean["depth"][clean["mask"]] > 0).all() and not np.array_equal(clean["depth"], v["depth"])
 
 
 def test_scores_of_the_true_pose_and_welch(bench):
