@@ -27,7 +27,7 @@ a table, distractor boxes, 64x64 px, the ``kinect_v1``, ``tof`` and ``realsense_
   sample std over ``--seeds`` seeds (initialisation and batch order), Welch's t-test against
   ``xyz``.
 
-Defaults: 1600 training and 400 test views, 10 epochs, 3 seeds, one torch thread; about 10
+Defaults: 1600 training and 400 test views, 15 epochs, 3 seeds, one torch thread; about 10
 minutes on the shared 2-core machine. Views are rendered once and cached in ``--cache``.
 """
 
@@ -291,7 +291,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--train", type=int, default=1600, help="training views (default 1600)")
     p.add_argument("--test", type=int, default=400, help="test views (default 400)")
     p.add_argument("--size", type=int, default=64, help="image side, px (default 64)")
-    p.add_argument("--epochs", type=int, default=10)
+    p.add_argument("--epochs", type=int, default=15)
     p.add_argument("--seeds", type=int, default=3)
     p.add_argument("--inputs", default=",".join(INPUTS))
     p.add_argument("--clean", action="store_true", help="exact rendered depth, no sensor noise")
