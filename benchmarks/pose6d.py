@@ -322,7 +322,7 @@ def figure(
             ax.imshow(img, cmap="viridis" if img.ndim == 2 else None, interpolation="nearest")
             if P is not None:
                 u, v = proj(P)
-                ax.plot(u, v, ",", color="lime" if c == 0 else "red", alpha=0.6)
+                ax.plot(u, v, ".", ms=1.0, color="lime" if c == 0 else "red", alpha=0.7)
             ax.set_xlim(-0.5, img.shape[1] - 0.5)
             ax.set_ylim(img.shape[0] - 0.5, -0.5)
             ax.set_xticks([])
