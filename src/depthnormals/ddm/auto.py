@@ -41,11 +41,12 @@ import numpy as np
 from .._parallel import run_rows
 from ..kernels.orient import store_nan, store_normal
 from .boxfit import box_fit_from_prepared
-from .noise import TILE, noise_pass, noise_tiles
+from .noise import TILE, NoiseSamples, noise_pass, noise_tiles
 from .planes import planes_from_prepared
+from .support import support_profile, support_select
 
-__all__ = ["AUTO_CONSISTENCY", "BIG_RADIUS", "GATE", "KEEP_CHI2", "MAX_RADIUS", "NOISE_CLEAN",
-           "PLANES_NOISE", "TARGET_STD", "auto_fused", "box_radius", "box_select",
+__all__ = ["AUTO_CONSISTENCY", "BIG_RADIUS", "EXCESS", "GATE", "KEEP_CHI2", "MAX_RADIUS", "NOISE_CLEAN",
+           "PLANES_NOISE", "TARGET_STD", "auto_fused", "box_radius", "box_select", "noisy_select",
            "plane_select", "refine_auto"]
 
 #: Noise (footprints) below which ``"auto"`` takes the plane hypotheses: float32 renders read
@@ -68,6 +69,12 @@ MAX_RADIUS = 6
 #: neighbour's normal replaces the pixel's only if its tangent inconsistency is strictly
 #: smaller ("self wins unless beaten"; the module's default 0.1 lets it be a little worse).
 AUTO_CONSISTENCY = 0.0
+#: Noisy branch: the measured fit errors may exceed those that the noise level predicts for
+#: independent noise by this factor before the support is measured instead of predicted
+#: (:meth:`depthnormals.ddm.support.SupportProfile.excess`: at most 1.12 on the analytic
+#: scenes with Gaussian noise of 0.01-1 footprints, 1.9-27 on the real frames of
+#: ``shared/data/real-sensors``; docs/3f2n-plus.md).
+EXCESS = 2.0
 #: Noisy branch: the estimator's normal is kept where it lies within this chi-square (2
 #: degrees of freedom) of the box-fit's slopes.
 KEEP_CHI2 = 2.0
@@ -170,6 +177,34 @@ def box_select(z: np.ndarray, base: np.ndarray | None, fx: float, fy: float, cx:
     return out
 
 
+def noisy_select(z: np.ndarray, base: np.ndarray | None, fx: float, fy: float, cx: float,
+                 cy: float, noise: NoiseSamples, *, keep_chi2: float | None = None) -> np.ndarray:
+    """The noisy branch on prepared depth ``z``, ``noise`` its noise pass. Where the noise is
+    independent per pixel (its rounding noise, if quantised, below its second-difference
+    level, and the fit errors measured on the depth within
+    :data:`EXCESS` of those its level predicts: :meth:`SupportProfile.excess`), the box-fit
+    of :func:`box_select`; otherwise (real sensor depth: quantised, or correlated over
+    several pixels) the box-fit over the measured support,
+    :func:`depthnormals.ddm.support.support_select`. With ``base`` (the estimator's
+    normals), NaN where it has none and its normal kept where it agrees with the fit within
+    the fit's error (:data:`KEEP_CHI2`; for the measured support the per-axis variance of
+    the slope is ``(e / sqrt(pi / 2) / fx)^2``, ``e`` the measured mean angular error)."""
+    sigma = noise.sigma
+    prof = support_profile(z, fx, fy, cx, cy, sigma)
+    if not noise.quant > noise.iid and prof.excess() <= EXCESS:
+        return box_select(z, base, fx, fy, cx, cy, sigma, keep_chi2=keep_chi2,
+                          levels=noise.tiles())
+    out = support_select(z, fx, fy, cx, cy, sigma, profile=prof)
+    if base is not None:
+        k2 = KEEP_CHI2 if keep_chi2 is None else float(keep_chi2)
+        e = prof.error[prof.radii.index(prof.radius)]
+        std = math.radians(e) / math.sqrt(math.pi / 2.0) if e == e else 0.0
+        kappa = k2 * (std / fx) ** 2
+        run_rows(_keep_rows, z.shape[0], z, base, kappa, float(fx), float(fy), float(cx),
+                 float(cy), out)
+    return out
+
+
 def plane_select(z: np.ndarray, base: np.ndarray | None, fx: float, fy: float, cx: float,
                  cy: float) -> np.ndarray:
     """The plane hypotheses on prepared depth ``z`` (:mod:`depthnormals.ddm.planes`); NaN
@@ -206,7 +241,7 @@ def refine_auto(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
     if branch == "planes":
         return plane_select(z, n_in, fx, fy, cx, cy)
     if branch == "box-fit":
-        return box_select(z, n_in, fx, fy, cx, cy, p.sigma, levels=p.tiles())
+        return noisy_select(z, n_in, fx, fy, cx, cy, p)
     out = curvature_refine(_clean_options(o))
     run_rows(_mask_rows, z.shape[0], n_in, out)
     return out
@@ -232,7 +267,7 @@ def auto_fused(fused_plus, depth, K, depth_scale, estimator_options: dict,
     if branch == "planes":
         return plane_select(z, None, cam.fx, cam.fy, cam.cx, cam.cy)
     if branch == "box-fit":
-        return box_select(z, None, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma, levels=p.tiles())
+        return noisy_select(z, None, cam.fx, cam.fy, cam.cx, cam.cy, p)
     c = _clean_options(o)
     return fused_plus(depth, K, depth_scale, estimator_options,
                       {**module_options, "selection": "curvature", "consistency": c["consistency"]})

@@ -12,12 +12,28 @@ with ``E|x| = sigma sqrt(2 / pi)`` for Gaussian noise and median ``0.6745 sigma`
 estimate is the median of ``x`` over horizontal and vertical triples of valid pixels divided
 by 0.6745 (the MAD rule): depth jumps and creases are a minority of the triples and do not
 move a median; curved surfaces add ``z / (f R)`` footprints (``R`` the radius of curvature),
-negligible at sensor scales. This is our reading (issue 13); nothing in the 3F2N+ paper
+negligible at sensor scales.
+
+**Quantised depth.** Structured-light sensors (Kinect v1, Xtion, PrimeSense) quantise
+disparity: depth comes in plateaus a few pixels wide separated by steps that grow with
+``z^2``. Inside a plateau every second difference is exactly zero, so the median above reads
+0 on such frames. The same pass therefore also looks for plateaus: along a sampled row (and
+column), where the depth changes over ``2 QUANT_SPAN`` pixels by a small amount (a sloped
+surface, not an edge), a clean or noisy surface changes between every two neighbours, a
+quantised one mostly does not. When the share of exact zeros among those neighbour
+differences is at least :data:`QUANT_SHARE`, the depth is quantised with a step ``Delta``
+(the median non-zero neighbour difference, footprints), and its rounding noise
+``Delta / sqrt(12)`` (the standard deviation of a uniform rounding error) is added in
+quadrature to the second-difference level. The result is the i.i.d. noise equivalent of the
+two, in one unit (footprints ``z / f``), never 0 on quantised sensor depth.
+
+Ours (docs/3f2n-plus.md, "The noise model of real sensors"); nothing in the 3F2N+ paper
 estimates noise.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numba as nb
@@ -25,11 +41,12 @@ import numpy as np
 
 from ..kernels.depth import prepare
 
-__all__ = ["TILE", "NoiseSamples", "estimate_noise", "estimate_noise_map", "noise_levels", "noise_pass",
-           "noise_tiles"]
+__all__ = ["QUANT_SHARE", "QUANT_SPAN", "TILE", "NoiseSamples", "estimate_noise", "estimate_noise_map",
+           "noise_levels", "noise_pass", "noise_tiles"]
 
 _MAD = 0.6744897501960817  # median of |N(0, 1)|
 _SQRT6 = 6.0 ** 0.5
+_SQRT12 = 12.0 ** 0.5
 #: Side of the square tiles of the per-region noise level (:func:`estimate_noise_map`).
 TILE = 64
 #: Inside a tile, every TILE_STRIDE-th row (and column, for vertical triples) is sampled:
@@ -37,6 +54,18 @@ TILE = 64
 TILE_STRIDE = 12
 #: A tile with fewer triples reads as NaN (the image's level is used there).
 TILE_MIN = 100
+#: Half-span (pixels) of the slope test of the plateau search: the depth at ``u +- QUANT_SPAN``
+#: must differ, by less than ``QUANT_EDGE`` footprints per pixel (a surface, not an edge).
+QUANT_SPAN = 4
+#: The plateau search reads every QUANT_STRIDE-th row and column (~25k neighbour pairs on
+#: 640x480).
+QUANT_STRIDE = 24
+#: Largest neighbour difference (footprints) counted as a quantisation step, not an edge.
+QUANT_EDGE = 20.0
+#: Share of exactly equal neighbours on sloped surfaces above which depth is quantised: 0 on
+#: float renders and on noisy depth (every neighbour differs), 0.40-0.81 on the Kinect v1 /
+#: Xtion frames of ``shared/data/real-sensors`` (docs/3f2n-plus.md).
+QUANT_SHARE = 0.3
 
 
 def noise_from_prepared(z: np.ndarray, fx: float, fy: float) -> float:
@@ -108,6 +137,66 @@ def _tile_samples(z, fx, fy, tile, stride, every, starts):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
+def _plateau_samples(z, fx, fy, stride, span, edge, out_steps):
+    """The plateau search of the module doc on every ``stride``-th row (neighbours along the
+    row) and column (along the column): at each pixel ``u`` whose depths at ``u +- span``
+    differ by less than ``edge`` footprints per pixel (and do differ), the neighbour
+    difference ``z(u + 1) - z(u)``. Writes the non-zero ones (footprints ``|dz| f / z``,
+    below ``edge``) into ``out_steps``; returns ``(tested, zero, steps)`` counts."""
+    h, w = z.shape
+    tested = 0
+    zero = 0
+    n = 0
+    for pass_ in range(2):
+        f = fx if pass_ == 0 else fy
+        lines = h if pass_ == 0 else w
+        length = w if pass_ == 0 else h
+        for i in range(stride // 2, lines, stride):
+            for j in range(span, length - span):
+                if pass_ == 0:
+                    a = np.float64(z[i, j - span])
+                    b = np.float64(z[i, j + span])
+                    c = np.float64(z[i, j])
+                    d = np.float64(z[i, j + 1])
+                else:
+                    a = np.float64(z[j - span, i])
+                    b = np.float64(z[j + span, i])
+                    c = np.float64(z[j, i])
+                    d = np.float64(z[j + 1, i])
+                if not (a == a and b == b and c == c and d == d) or a == b:
+                    continue
+                if abs(b - a) * f / c >= 2.0 * span * edge:
+                    continue
+                step = abs(d - c) * f / c
+                if step >= edge:
+                    continue
+                tested += 1
+                if step == 0.0:
+                    zero += 1
+                elif n < out_steps.size:
+                    out_steps[n] = step
+                    n += 1
+    return tested, zero, n
+
+
+def quantisation_step(z: np.ndarray, fx: float, fy: float) -> tuple[float, float]:
+    """The plateau search of the module doc on prepared depth: ``(share, step)``, the share
+    of exactly equal neighbours on sloped surfaces and the median non-zero step
+    (footprints); ``step`` is 0 where ``share < QUANT_SHARE`` (not quantised), ``share`` NaN
+    where nothing was tested."""
+    h, w = z.shape
+    steps = np.empty((h // QUANT_STRIDE + 1) * w + (w // QUANT_STRIDE + 1) * h)
+    tested, zero, n = _plateau_samples(z, float(fx), float(fy), QUANT_STRIDE, QUANT_SPAN,
+                                       QUANT_EDGE, steps)
+    if tested == 0:
+        return float("nan"), 0.0
+    share = zero / tested
+    if share < QUANT_SHARE or n == 0:
+        return share, 0.0
+    return share, float(np.partition(steps[:n], n // 2)[n // 2])
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
 def _tile_medians(every, starts, minimum, out):
     """Median of each tile's samples (reorders them); NaN below ``minimum`` samples."""
     for t in range(out.size):
@@ -116,23 +205,44 @@ def _tile_medians(every, starts, minimum, out):
         out.flat[t] = _kth(every[a:a + m], m, m // 2) if m >= minimum else np.nan
 
 
+def _median_nonneg(a: np.ndarray) -> float:
+    """The upper median of non-negative samples ``a`` (numpy's selection on a copy), with the
+    zeros counted first: on quantised depth most are exactly 0, where the selection is slow."""
+    n = a.size
+    k = n // 2
+    pos = a[a > 0.0]
+    k -= n - pos.size
+    return float(np.partition(pos, k)[k]) if k >= 0 else 0.0
+
+
 class NoiseSamples:
     """The samples of one pass over prepared depth (:func:`noise_pass`): the image's level
-    now (``sigma``), every tile's on demand (:meth:`tiles`)."""
+    now (``sigma``), every tile's on demand (:meth:`tiles`).
 
-    def __init__(self, every: np.ndarray, starts: np.ndarray, shape: tuple[int, int]):
+    ``iid``: the second-difference level (footprints); ``quant_share``, ``quant_step``: the
+    plateau search (:func:`quantisation_step`); ``quant``: the rounding noise
+    ``quant_step / sqrt(12)``; ``sigma``: ``sqrt(iid^2 + quant^2)``, the level every branch
+    reads."""
+
+    def __init__(self, every: np.ndarray, starts: np.ndarray, shape: tuple[int, int],
+                 quant: tuple[float, float] = (float("nan"), 0.0)):
         self._every = every
         self._starts = starts
         self._shape = shape
         n = every.size
         # numpy's selection (a copy: the tiles' samples stay in place)
-        self.sigma = float(np.partition(every, n // 2)[n // 2]) / (_MAD * _SQRT6) if n else float("nan")
+        self.iid = _median_nonneg(every) / (_MAD * _SQRT6) if n else float("nan")
+        self.quant_share, self.quant_step = quant
+        self.quant = self.quant_step / _SQRT12
+        self.sigma = math.hypot(self.iid, self.quant) if self.quant > 0.0 else self.iid
 
     def tiles(self) -> np.ndarray:
-        """Every tile's level, footprints (tiles down, across), NaN below :data:`TILE_MIN`."""
+        """Every tile's level, footprints (tiles down, across), NaN below :data:`TILE_MIN`:
+        its second-difference level and the image's rounding noise in quadrature."""
         out = np.empty(self._shape)
         _tile_medians(self._every, self._starts, TILE_MIN, out)
-        return out / (_MAD * _SQRT6)
+        out /= _MAD * _SQRT6
+        return np.hypot(out, self.quant) if self.quant > 0.0 else out
 
 
 def noise_pass(z: np.ndarray, fx: float, fy: float, *, tile: int = TILE) -> NoiseSamples:
@@ -143,7 +253,7 @@ def noise_pass(z: np.ndarray, fx: float, fy: float, *, tile: int = TILE) -> Nois
     every = np.empty((h // TILE_STRIDE + shape[0] + 1) * (w + w // TILE_STRIDE + shape[1] + 1))
     starts = np.empty(shape[0] * shape[1] + 1, dtype=np.int64)
     n = _tile_samples(z, float(fx), float(fy), int(tile), TILE_STRIDE, every, starts)
-    return NoiseSamples(every[:n], starts, shape)
+    return NoiseSamples(every[:n], starts, shape, quantisation_step(z, fx, fy))
 
 
 def noise_levels(z: np.ndarray, fx: float, fy: float, *,

@@ -1,0 +1,377 @@
+"""The support of the noisy branch, measured on the depth itself (ours, not the paper's).
+
+The box-fit (:mod:`depthnormals.ddm.boxfit`) fits least-squares planes of inverse depth over
+square windows. How large a window must be depends on the noise, and real sensor noise is not
+the independent per-pixel noise of the synthetic models: structured light correlates it over
+its matching window, lens blur and multipath over a few pixels, and disparity quantisation
+makes it a staircase. A window radius predicted from a per-pixel noise level is then far too
+small (docs/3f2n-plus.md, "The noise model of real sensors").
+
+So the radius is chosen from a measurement of what it is for, the error of the fitted normal:
+
+1. For each candidate radius ``r`` in :data:`RADII`, windows of ``(2 r + 1)^2`` pixels are
+   fitted on a grid of about :data:`SAMPLES` sample pixels (spacing at least
+   ``2 (2 r + 1)``; windows from :data:`SPARSE_RADIUS` on read on every second row and
+   column), each beside its right and
+   lower neighbour window (adjacent, not overlapping). On one plane the two fits differ only
+   by their errors: for independent isotropic errors, the mean angular error of one fit is
+   ``0.753`` times the median angle between the two (:data:`PAIR_TO_ERROR`, Rayleigh
+   statistics). Pairs straddling an edge or a crease are left out: only pairs whose larger
+   residual variance is at most the median of all pairs count.
+2. The measured error is never taken below the error that the depth's noise level predicts
+   for a plane of independent noise (``sigma / sqrt(S_uu)`` radians per axis,
+   :func:`predicted_error`): on quantised depth two small windows inside one plateau agree
+   exactly and would read as noise-free.
+3. The radius is the smallest whose error is at most :data:`TARGET_ERROR` degrees, or the one
+   of least error when none reaches it.
+
+The branch then runs the box-fit with that radius: the centred window where its residual
+variance is within ``GATE`` times the measured plane residual at that radius, a larger
+centred window (:data:`BIG_FACTOR` ``r``, fitted on every second row and column, a pixel
+reading the nearest such window) first where it passes the same test, otherwise the window
+of least residual among the nine that contain the pixel (one-sided at edges). The gates grow
+with depth as the measured plane residual does (:func:`depth_exponent`). All of it runs over
+running sums: the cost does not depend on the radius.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+from .._parallel import run_rows
+from .boxfit import SHIFTS, box_fit_windows, solve_window
+
+__all__ = ["BIG_FACTOR", "GATE", "MAX_RADIUS", "PAIR_TO_ERROR", "RADII", "TARGET_ERROR",
+           "SupportProfile", "predicted_error", "support_profile", "support_select"]
+
+#: Candidate window radii (windows of 3x3 to 33x33 pixels).
+RADII = (1, 2, 3, 4, 6, 8, 11, 16)
+#: Largest radius of any window the branch fits (the large centred one included).
+MAX_RADIUS = 24
+#: Target mean angular error (degrees) of a fitted normal on a plane: the radius is the
+#: smallest that reaches it. 2.5 deg is the mean error of a 2-D isotropic error of 2 deg
+#: standard deviation per axis (the i.i.d. rule's former target, 0.035 rad).
+TARGET_ERROR = 1.0
+#: Mean angular error of one fit per unit of the median angle between two independent fits
+#: (Rayleigh: mean s sqrt(pi / 2) of one, median s sqrt(2) sqrt(2 ln 2) of the difference).
+PAIR_TO_ERROR = math.sqrt(math.pi / 2.0) / (2.0 * math.sqrt(math.log(2.0)))
+#: Radii whose predicted error (independent noise) is below this many degrees do not count
+#: in :meth:`SupportProfile.excess`.
+EXCESS_FLOOR = 1.0
+#: A window is kept while its residual variance is within GATE times the median plane
+#: residual measured at its radius.
+GATE = 2.0
+#: The large centred window has radius ``round(BIG_FACTOR r)`` (at most :data:`MAX_RADIUS`).
+BIG_FACTOR = 2.0
+#: Largest exponent of the residual's growth with depth (Kinect-like noise, ``sigma_z ~ z^2``,
+#: gives ``sigma ~ z`` in footprints and a variance ~ ``z^2``).
+MAX_EXPONENT = 2.0
+#: A sampled window needs this share of valid pixels.
+MIN_VALID = 0.6
+#: Fewest pairs for a radius to be measured.
+MIN_PAIRS = 12
+#: Sample windows per radius, about (the grid spacing is at least ``2 (2 r + 1)``): the
+#: median angle of ~2 x 100 pairs is known to ~12 %.
+SAMPLES = 100
+#: From this radius on, a sampled window is fitted on every second row and column (a quarter
+#: of its pixels): the measurement then costs about the same for every radius (~0.1 ms at
+#: 640x480). Sensor noise correlated over two pixels or more loses nothing by it; on
+#: independent noise the error read is up to 2x the full window's, but there the smaller,
+#: fully read radii reach the target first.
+SPARSE_RADIUS = 6
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _fit(z, v, u, r, fx, fy, cx, cy, every):
+    """Least-squares plane of ``1 / z`` over the window of radius ``r`` centred at (v, u),
+    read on every ``every``-th row and column: (residual variance in footprints^2, unit
+    normal x, y, z); NaN without a fit."""
+    h, w = z.shape
+    n = 0.0
+    su = 0.0
+    sv = 0.0
+    suu = 0.0
+    suv = 0.0
+    svv = 0.0
+    sw = 0.0
+    suw = 0.0
+    svw = 0.0
+    sww = 0.0
+    for dv in range(-r, r + 1, every):
+        a = v + dv
+        if a < 0 or a >= h:
+            continue
+        for du in range(-r, r + 1, every):
+            b = u + du
+            if b < 0 or b >= w:
+                continue
+            zz = np.float64(z[a, b])
+            if not (zz == zz):
+                continue
+            x = 1.0 / zz
+            n += 1.0
+            su += du
+            sv += dv
+            suu += du * du
+            suv += du * dv
+            svv += dv * dv
+            sw += x
+            suw += du * x
+            svw += dv * x
+            sww += x * x
+    nan = np.nan
+    if n < MIN_VALID * ((2 * r) // every + 1) ** 2:
+        return nan, nan, nan, nan
+    pa, pb, c, rss, ok = solve_window(n, su, sv, suu, suv, svv, sw, suw, svw, sww)
+    if not ok or not (c > 0.0):
+        return nan, nan, nan, nan
+    nx = fx * pa
+    ny = fy * pb
+    nz = c - pa * (u - cx) - pb * (v - cy)
+    s = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
+    return rss * fx * fx / ((n - 3.0) * c * c), nx * s, ny * s, nz * s
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _pairs(z, r, fx, fy, cx, cy, step, every, out):
+    """Adjacent-window pairs of radius ``r`` on a grid of spacing ``step``: each row of
+    ``out`` gets (angle between the two normals in degrees, the larger residual variance,
+    the depth at the first window's centre); returns the number of rows written."""
+    h, w = z.shape
+    d = 2 * r + 1
+    k = 0
+    for v in range(r, h - r, step):
+        for u in range(r, w - r, step):
+            if not (z[v, u] == z[v, u]):
+                continue
+            s0, x0, y0, t0 = _fit(z, v, u, r, fx, fy, cx, cy, every)
+            if not (s0 == s0):
+                continue
+            for o in range(2):
+                vv = v + d * o
+                uu = u + d * (1 - o)
+                if vv >= h - r or uu >= w - r or k >= out.shape[0]:
+                    continue
+                s1, x1, y1, t1 = _fit(z, vv, uu, r, fx, fy, cx, cy, every)
+                if not (s1 == s1):
+                    continue
+                dot = min(1.0, max(-1.0, x0 * x1 + y0 * y1 + t0 * t1))
+                out[k, 0] = math.degrees(math.acos(dot))
+                out[k, 1] = max(s0, s1)
+                out[k, 2] = z[v, u]
+                k += 1
+    return k
+
+
+def predicted_error(sigma: float, r: int, every: int = 1) -> float:
+    """Mean angular error (degrees) of a plane fitted over a full ``(2 r + 1)^2`` window of
+    independent noise ``sigma`` (footprints), read on every ``every``-th row and column,
+    fronto-parallel: per-axis standard deviation ``sigma / sqrt(S_uu)`` radians
+    (``S_uu = sum du^2`` over the window's pixels), times ``sqrt(pi / 2)``."""
+    if not sigma > 0.0:
+        return 0.0
+    offsets = np.arange(-r, r + 1, every, dtype=np.float64)
+    suu = offsets.size * float(np.sum(offsets * offsets))
+    return math.degrees(math.sqrt(math.pi / 2.0) * sigma / math.sqrt(suu))
+
+
+@dataclass(frozen=True)
+class SupportProfile:
+    """What :func:`support_profile` measured: per candidate radius (:data:`RADII`, those
+    measured), the mean angular error of a fitted normal (``error``, degrees, the larger of
+    the measured and the predicted one) and the median plane residual variance
+    (``residual``, footprints^2); the chosen ``radius``; how the plane residual grows with
+    depth at that radius, ``residual ~ (z / depth) ** exponent`` (:func:`depth_exponent`)."""
+
+    radii: tuple[int, ...]
+    error: tuple[float, ...]
+    residual: tuple[float, ...]
+    radius: int
+    depth: float = float("nan")
+    exponent: float = 0.0
+    measured: tuple[float, ...] = ()
+    predicted: tuple[float, ...] = ()
+
+    def excess(self) -> float:
+        """How far the measured fit errors exceed those the noise level predicts for
+        independent noise: the largest ratio over the measured radii from 2 on whose
+        predicted error is at least :data:`EXCESS_FLOOR` degrees (below it the scene's own
+        curvature and clutter, not the noise, make the measured error); 1 where there is
+        none. At most 1.1 for independent noise, 1.3-1.9 for the 0.5 px blur of the ``tof``
+        model, 2.4-4 on the correlated sensor frames of ``shared/data/real-sensors``
+        (docs/3f2n-plus.md)."""
+        ratios = [m / p for r, m, p in zip(self.radii, self.measured, self.predicted, strict=True)
+                  if r >= 2 and p >= EXCESS_FLOOR]
+        return max(ratios) if ratios else 1.0
+
+    def residual_at(self, r: int) -> float:
+        """The median plane residual variance at a measured radius (the nearest one)."""
+        i = min(range(len(self.radii)), key=lambda j: abs(self.radii[j] - r))
+        return self.residual[i]
+
+
+def depth_exponent(res: np.ndarray, z: np.ndarray) -> tuple[float, float]:
+    """How plane residual variances ``res`` grow with the depth ``z`` of their windows:
+    ``(z_ref, exponent)`` with ``res ~ (z / z_ref) ** exponent``, from the medians of the
+    nearer and the farther half (``z_ref`` the median depth), clipped to
+    ``[0, MAX_EXPONENT]``; exponent 0 where the two halves are too close in depth."""
+    zm = float(np.median(z))
+    near = z <= zm
+    if near.all() or not near.any():
+        return zm, 0.0
+    zn, zf = float(np.median(z[near])), float(np.median(z[~near]))
+    rn, rf = float(np.median(res[near])), float(np.median(res[~near]))
+    if not (zf > 1.1 * zn and rn > 0.0 and rf > 0.0):
+        return zm, 0.0
+    return zm, min(MAX_EXPONENT, max(0.0, math.log(rf / rn) / math.log(zf / zn)))
+
+
+def support_profile(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
+                    sigma: float, *, target: float = TARGET_ERROR) -> SupportProfile:
+    """Measure the fitted normal's error per radius on prepared depth ``z`` (module doc) and
+    choose the radius; ``sigma`` is the noise level (footprints, :func:`estimate_noise`).
+    Radii are measured smallest first and the search stops at the first that reaches
+    ``target``."""
+    h, w = z.shape
+    radii, errors, residuals, kept, meas, pred = [], [], [], [], [], []
+    for r in RADII:
+        step = max(2 * (2 * r + 1), int(math.sqrt(h * w / SAMPLES)))
+        out = np.empty((2 * (h // step + 1) * (w // step + 1), 3))
+        every = 2 if r >= SPARSE_RADIUS else 1
+        k = _pairs(z, r, float(fx), float(fy), float(cx), float(cy), step, every, out)
+        if k < MIN_PAIRS:
+            break
+        ang, res = out[:k, 0], out[:k, 1]
+        keep = res <= float(np.median(res))
+        measured = PAIR_TO_ERROR * float(np.median(ang[keep]))
+        radii.append(r)
+        meas.append(measured)
+        pred.append(predicted_error(sigma, r, every))
+        errors.append(max(measured, predicted_error(sigma, r)))
+        residuals.append(float(np.median(res[keep])))
+        kept.append(out[:k][keep])
+        if errors[-1] <= target:
+            break
+    if not radii:
+        return SupportProfile((1,), (float("nan"),), (0.0,), 1, measured=(float("nan"),),
+                              predicted=(0.0,))
+    i = next((j for j, e in enumerate(errors) if e <= target), int(np.argmin(errors)))
+    zref, gamma = depth_exponent(kept[i][:, 1], kept[i][:, 2])
+    return SupportProfile(tuple(radii), tuple(errors), tuple(residuals), radii[i], zref, gamma,
+                          tuple(meas), tuple(pred))
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _least(a, out_best, out_k, k):
+    """``out_best = min(out_best, a)`` elementwise, ``out_k = k`` where ``a`` is smaller
+    (slices from 0, so the loop vectorises: an index ``u + du`` with a negative ``du`` kept
+    it scalar, 16x slower)."""
+    for i in range(a.size):
+        x = a[i]
+        b = out_best[i]
+        take = x < b
+        out_best[i] = x if take else b
+        out_k[i] = k if take else out_k[i]
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _choose_least_rows(v0, v1, z, fits, big, shift, gates, cam, out):
+    """Rows ``[v0, v1)`` of the window choice.
+
+    ``fits = (normals (3, H, W), scores (H, W))`` of the radius-``shift`` windows; ``big``
+    the same of the large centred windows fitted on every second row and column (shape
+    ``(ceil(H / 2), ceil(W / 2))``, pixel (v, u) reads ``(v // 2, u // 2)``; a (1, W) score
+    row: none); ``gates = (gate, big_gate, zref, half_exponent)`` (footprints^2, growing as
+    ``(z / zref)^(half_exponent / 2)``, ``half_exponent`` an integer 0..4); ``cam = (fx, fy,
+    cx, cy)``. A pixel takes the large window where its score is within the big gate, else
+    the centred window where its score is within the gate, else the least score of the nine
+    windows that hold it (the centred one wins ties). Writes ``out`` (H, W, 3): unit normals
+    turned toward the pixel's ray, NaN at invalid depth or without a fit. Every loop runs
+    along a row (vectorised); the choice is one small index a pixel."""
+    fit_n, score = fits
+    big_n, big_s = big
+    gate0, big_gate0, zref, half = gates
+    fx, fy, cx, cy = cam
+    h, w = z.shape
+    use_big = big_s.shape[0] == (h + 1) // 2
+    g0 = np.float32(gate0)
+    gb = np.float32(big_gate0)
+    izref = np.float32(1.0 / zref if zref > 0.0 else 0.0)
+    best = np.empty(w, dtype=np.float32)
+    fac = np.ones(w, dtype=np.float32)
+    kk = np.zeros(w, dtype=np.int32)
+    nan = np.float32(np.nan)
+    for v in range(v0, v1):
+        srow = score[v]
+        zrow = z[v]
+        if half > 0:  # (z / zref)^(half / 2), without a transcendental function
+            for u in range(w):
+                t = np.float32(zrow[u]) * izref
+                q = np.sqrt(t)
+                f = t * t if half == 4 else (t * q if half == 3 else (t if half == 2 else q))
+                fac[u] = f
+        for u in range(w):
+            x = srow[u]
+            best[u] = np.float32(-1.0) if x <= g0 * fac[u] else x
+            kk[u] = 0
+        for k in range(1, SHIFTS.shape[0]):
+            r = v + shift * SHIFTS[k, 0]
+            if r < 0 or r >= h:
+                continue
+            du = shift * SHIFTS[k, 1]
+            lo = max(0, -du)
+            hi = min(w, w - du)
+            _least(score[r, lo + du:hi + du], best[lo:hi], kk[lo:hi], np.int32(k))
+        for u in range(w):
+            if not (zrow[u] == zrow[u]) or not (best[u] < np.inf):
+                out[v, u, 0] = nan
+                out[v, u, 1] = nan
+                out[v, u, 2] = nan
+                continue
+            if use_big and big_s[v >> 1, u >> 1] <= gb * fac[u]:
+                nx = big_n[0, v >> 1, u >> 1]
+                ny = big_n[1, v >> 1, u >> 1]
+                nz = big_n[2, v >> 1, u >> 1]
+            else:
+                k = kk[u]
+                r = v + shift * SHIFTS[k, 0]
+                c = u + shift * SHIFTS[k, 1]
+                nx = fit_n[0, r, c]
+                ny = fit_n[1, r, c]
+                nz = fit_n[2, r, c]
+            if nx * ((u - cx) / fx) + ny * ((v - cy) / fy) + nz > 0.0:
+                nx = -nx
+                ny = -ny
+                nz = -nz
+            out[v, u, 0] = nx
+            out[v, u, 1] = ny
+            out[v, u, 2] = nz
+
+
+def support_select(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
+                   sigma: float, *, profile: SupportProfile | None = None) -> np.ndarray:
+    """The noisy branch on prepared depth ``z`` (module doc): normals (H, W, 3) float32, NaN
+    at invalid depth and where no window has a fit. ``sigma``: the noise level
+    (footprints); ``profile``: the measured support when already known."""
+    p = support_profile(z, fx, fy, cx, cy, sigma) if profile is None else profile
+    r = p.radius
+    big = min(MAX_RADIUS, round(BIG_FACTOR * r))
+    gate = GATE * p.residual_at(r)
+    h, w = z.shape
+    fits = box_fit_windows(z, fx, fy, cx, cy, r)
+    if big > r:  # on every second row and column: a quarter of the cost
+        zd = np.ascontiguousarray(z[::2, ::2])
+        bn, bs = box_fit_windows(zd, 0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy, (big + 1) // 2)
+        bigs = (bn, bs * np.float32(4.0))  # footprints of the full image
+    else:
+        bigs = (fits[0][:, :1], np.full((1, w), np.inf, dtype=np.float32))
+    out = np.empty((h, w, 3), dtype=np.float32)
+    half = round(2.0 * p.exponent) if p.depth == p.depth else 0
+    run_rows(_choose_least_rows, h, z, fits, bigs, int(r),
+             (float(gate), float(gate), float(p.depth), half),
+             (float(fx), float(fy), float(cx), float(cy)), out, min_rows=16)
+    return out
