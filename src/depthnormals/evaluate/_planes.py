@@ -46,6 +46,9 @@ MAX_RMS_RATIO = 0.45
 COMPETITOR_FRACTION = 0.0025
 #: Extraction stops after this many rejected planes in a row.
 MAX_FAILURES = 5
+#: A region that fails the residual tests is grown again within this share of the threshold
+#: (two parallel surfaces closer than the threshold fail as one; the tighter band holds one).
+SPLIT_FACTOR = 0.5
 #: Hypotheses (the most inliers first) whose largest connected region is compared.
 TOP_HYPOTHESES = 8
 #: Rounds of reassignment and refits after the extraction.
@@ -308,6 +311,12 @@ def _extract(pts: np.ndarray, thr: np.ndarray, valid: np.ndarray, p: _Params,
         pick = idx[rng.choice(idx.size, min(p.n_sample, idx.size), replace=False)]
         best = _best_hypothesis(pts, thr, remaining, hyps, pick)
         region, plane = _grow(pts, thr, remaining, best, p.refits)
+        if region.sum() >= p.min_competitor and not _flat(pts, thr, region, plane, p):
+            # two parallel surfaces closer than the threshold (two desk tops, a rug on the
+            # floor) fail as one: try the tighter band, which holds one of them
+            split, split_plane = _grow(pts, SPLIT_FACTOR * thr, remaining, plane, p.refits)
+            if split.sum() >= p.min_competitor and _flat(pts, thr, split, split_plane, p):
+                region, plane = split, split_plane
         remaining &= ~region
         if region.sum() < p.min_competitor or not _flat(pts, thr, region, plane, p):
             failures += 1
