@@ -129,3 +129,19 @@ def test_synth_rerun_with_other_settings_is_refused(tmp_path, capsys):
     assert main([*base, "--seed", "1"]) == 1
     err = capsys.readouterr().err
     assert "other settings" in err and "another output folder" in err
+
+
+def test_forced_run_over_fewer_frames_does_not_vouch_for_the_rest(folder, capsys):
+    """--no-resume with other settings on 2 of 3 frames: the third output is stale, so the
+    folder gets no manifest and the next run recomputes everything (never 'done before')."""
+    assert _run(folder) == 0
+    two = [str(folder / "in" / "0.png"), str(folder / "in" / "1.png")]
+    argv = ["estimate", *two, "-K", str(folder / "k.json"), "-o", str(folder / "out"), "-q",
+            "--depth-scale", "0.001", "-m", "fals", "--no-resume"]
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert "1 output(s)" in err and "2.npy" in err and "not recomputed" in err
+    assert not (folder / "out" / jobs.MANIFEST).exists()
+    assert _run(folder, "-m", "fals") == 0
+    assert "(3 computed, 0 done before)" in capsys.readouterr().out
+    assert json.loads((folder / "out" / jobs.MANIFEST).read_text())["settings"]["method"] == "fals"

@@ -100,7 +100,9 @@ class EstimateJob:
 class RunSummary:
     """What :func:`run_estimate` did: frames planned, computed now, found done, seconds;
     ``not_depth``: the (file, reason) pairs skipped as no depth image; ``no_normal``: the
-    outputs written now that hold no finite normal (all NaN)."""
+    outputs written now that hold no finite normal (all NaN); ``stale``: outputs of other or
+    unknown settings that a forced run found in the folder and did not replace (the folder
+    then gets no manifest, so a later run recomputes them)."""
 
     planned: int
     written: int
@@ -108,6 +110,7 @@ class RunSummary:
     seconds: float
     not_depth: tuple[tuple[str, str], ...] = ()
     no_normal: tuple[str, ...] = ()
+    stale: tuple[str, ...] = ()
 
 
 def _is_glob(text: str) -> bool:
@@ -437,6 +440,7 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
         (out / MANIFEST).unlink(missing_ok=True)
     t0 = time.perf_counter()
     counts = {"planned": 0, "skipped": 0, "written": 0}
+    planned: set[Path] = set()
     not_depth: list[tuple[str, str]] = []
     no_normal: list[str] = []
 
@@ -444,6 +448,8 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
         for job in plan_estimate(inputs, out, K=K, fmt=fmt,
                                  on_skip=lambda p, why: not_depth.append((str(p), why))):
             counts["planned"] += 1
+            if not trusted and not fresh:
+                planned.add(job.output)
             if resume and trusted and job.output.is_file():
                 counts["skipped"] += 1
                 bar.update(f"{job.label} (done before)")
@@ -475,7 +481,10 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
         raise
     if counts["planned"] == 0:
         raise ValueError(f"the inputs {', '.join(map(str, inputs))} hold no frame")
+    stale: list[str] = []
     if not trusted and not fresh:
-        _write_manifest(out, wanted)
+        stale = sorted(str(p) for p in out.absolute().rglob(f"*.{fmt}") if p.is_file() and p not in planned)
+        if not stale:
+            _write_manifest(out, wanted)
     return RunSummary(counts["planned"], len(results), counts["skipped"], time.perf_counter() - t0,
-                      tuple(not_depth), tuple(sorted(no_normal)))
+                      tuple(not_depth), tuple(sorted(no_normal)), tuple(stale))

@@ -155,6 +155,11 @@ def run_many(args: argparse.Namespace) -> int:
         more = f"; and {len(s.not_depth) - 5} more" if len(s.not_depth) > 5 else ""
         print(f"depthnormals estimate: skipped {len(s.not_depth)} file(s) that are not depth images "
               f"({shown}{more})", file=sys.stderr)
+    if s.stale:
+        print(f"depthnormals estimate: warning: {len(s.stale)} output(s) in {args.output} were made "
+              f"with other or unknown settings and not recomputed by this run (e.g. {s.stale[0]}); the "
+              "folder gets no manifest, so the next run recomputes every frame; remove them or use "
+              "a new output folder", file=sys.stderr)
     if s.no_normal:
         n = len(s.no_normal)
         shown = ", ".join(s.no_normal[:5]) + (f" and {n - 5} more" if n > 5 else "")
