@@ -278,3 +278,9 @@ def test_vis_png_colour_conventions(tmp_path, kjson, depth):
 
 def test_manifest_name_is_public():
     assert jobs.MANIFEST == "depthnormals-manifest.json"
+
+
+def test_invalid_codes_never_wrap_around(tmp_path):
+    np.save(tmp_path / "u.npy", np.array([[1000, 4464, 65535], [5, 6, 7]], np.uint16))
+    z = io.read_depth(tmp_path / "u.npy", depth_scale=0.001, invalid=[70000, -1, 65535, 5.5])
+    assert np.isnan(z[0, 2]) and np.isfinite(z[0, :2]).all() and np.isfinite(z[1]).all()

@@ -173,8 +173,12 @@ def read_depth(path: str | Path, *, depth_scale: float | None = None,
                          "depth image (H, W); pass the depth image itself")
     bad = None
     if len(invalid):
-        codes = np.asarray([float(_finite(c, "invalid")) for c in invalid])
-        bad = np.isin(arr, codes.astype(arr.dtype) if arr.dtype.kind in "iu" else codes)
+        codes = np.asarray([_finite(c, "invalid") for c in invalid])
+        if arr.dtype.kind in "iu":  # only the codes this integer type can hold (no wrap-around)
+            info = np.iinfo(arr.dtype)
+            codes = codes[(codes == np.round(codes)) & (codes >= info.min) & (codes <= info.max)]
+            codes = codes.astype(arr.dtype)
+        bad = np.isin(arr, codes)
     z = check_depth(arr, depth_scale=depth_scale, name=f"depth in {path}")
     if bad is not None and bad.any():
         z = z if z is not arr else z.copy()
