@@ -45,8 +45,9 @@ import numpy as np
 from .._parallel import run_rows
 from .boxfit import SHIFTS, box_fit_windows, solve_window
 
-__all__ = ["BIG_FACTOR", "GATE", "MAX_RADIUS", "PAIR_TO_ERROR", "RADII", "TARGET_ERROR",
-           "SupportProfile", "predicted_error", "support_profile", "support_select"]
+__all__ = ["BIG_FACTOR", "EXCESS_FLOOR", "GATE", "MAX_RADIUS", "PAIR_TO_ERROR", "RADII",
+           "TARGET_ERROR", "SupportProfile", "choice_inputs", "choose_pixel", "depth_exponent",
+           "predicted_error", "support_profile", "support_select"]
 
 #: Candidate window radii (windows of 3x3 to 33x33 pixels).
 RADII = (1, 2, 3, 4, 6, 8, 11, 16)
@@ -265,6 +266,47 @@ def support_profile(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
                           tuple(meas), tuple(pred))
 
 
+@nb.njit(cache=True, error_model="numpy")
+def choose_pixel(z, fits, big, shift, gates, cam, v, u):
+    """The readable reference of :func:`_choose_least_rows` at one pixel (same arguments):
+    its normal ``(x, y, z)`` (NaN where it has none). Tested to agree with the fast rows."""
+    fit_n, score = fits
+    big_n, big_s = big
+    gate0, big_gate0, zref, half = gates
+    fx, fy, cx, cy = cam
+    h, w = z.shape
+    nan = np.float32(np.nan)
+    zq = z[v, u]
+    if not (zq == zq):
+        return nan, nan, nan
+    fac = np.float32(1.0)
+    if half > 0:
+        t = np.float32(zq) * np.float32(1.0 / zref)
+        q = np.sqrt(t)
+        fac = t * t if half == 4 else (t * q if half == 3 else (t if half == 2 else q))
+    best = score[v, u]
+    if best <= np.float32(gate0) * fac:
+        best = np.float32(-1.0)
+    bv = v
+    bu = u
+    for k in range(1, SHIFTS.shape[0]):  # the first of equal scores wins
+        r = v + shift * SHIFTS[k, 0]
+        c = u + shift * SHIFTS[k, 1]
+        if 0 <= r < h and 0 <= c < w and score[r, c] < best:
+            best = score[r, c]
+            bv = r
+            bu = c
+    if not (best < np.inf):
+        return nan, nan, nan
+    if big_s.shape[0] == (h + 1) // 2 and big_s[v >> 1, u >> 1] <= np.float32(big_gate0) * fac:
+        nx, ny, nz = big_n[0, v >> 1, u >> 1], big_n[1, v >> 1, u >> 1], big_n[2, v >> 1, u >> 1]
+    else:
+        nx, ny, nz = fit_n[0, bv, bu], fit_n[1, bv, bu], fit_n[2, bv, bu]
+    if nx * ((u - cx) / fx) + ny * ((v - cy) / fy) + nz > 0.0:
+        return -nx, -ny, -nz
+    return nx, ny, nz
+
+
 @nb.njit(cache=True, error_model="numpy", inline="always")
 def _least(a, out_best, out_k, k):
     """``out_best = min(out_best, a)`` elementwise, ``out_k = k`` where ``a`` is smaller
@@ -352,16 +394,14 @@ def _choose_least_rows(v0, v1, z, fits, big, shift, gates, cam, out):
             out[v, u, 2] = nz
 
 
-def support_select(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
-                   sigma: float, *, profile: SupportProfile | None = None) -> np.ndarray:
-    """The noisy branch on prepared depth ``z`` (module doc): normals (H, W, 3) float32, NaN
-    at invalid depth and where no window has a fit. ``sigma``: the noise level
-    (footprints); ``profile``: the measured support when already known."""
-    p = support_profile(z, fx, fy, cx, cy, sigma) if profile is None else profile
-    r = p.radius
+def choice_inputs(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
+                  profile: SupportProfile) -> tuple:
+    """The arguments of the window choice after the rows (``fits, big, shift, gates, cam``):
+    the box-fit passes at the profile's radius and at the large radius (half resolution)."""
+    r = profile.radius
     big = min(MAX_RADIUS, round(BIG_FACTOR * r))
-    gate = GATE * p.residual_at(r)
-    h, w = z.shape
+    gate = GATE * profile.residual_at(r)
+    w = z.shape[1]
     fits = box_fit_windows(z, fx, fy, cx, cy, r)
     if big > r:  # on every second row and column: a quarter of the cost
         zd = np.ascontiguousarray(z[::2, ::2])
@@ -369,9 +409,18 @@ def support_select(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
         bigs = (bn, bs * np.float32(4.0))  # footprints of the full image
     else:
         bigs = (fits[0][:, :1], np.full((1, w), np.inf, dtype=np.float32))
+    half = round(2.0 * profile.exponent) if profile.depth == profile.depth else 0
+    gates = (float(gate), float(gate), float(profile.depth), half)
+    return fits, bigs, int(r), gates, (float(fx), float(fy), float(cx), float(cy))
+
+
+def support_select(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
+                   sigma: float, *, profile: SupportProfile | None = None) -> np.ndarray:
+    """The noisy branch on prepared depth ``z`` (module doc): normals (H, W, 3) float32, NaN
+    at invalid depth and where no window has a fit. ``sigma``: the noise level
+    (footprints); ``profile``: the measured support when already known."""
+    p = support_profile(z, fx, fy, cx, cy, sigma) if profile is None else profile
+    h, w = z.shape
     out = np.empty((h, w, 3), dtype=np.float32)
-    half = round(2.0 * p.exponent) if p.depth == p.depth else 0
-    run_rows(_choose_least_rows, h, z, fits, bigs, int(r),
-             (float(gate), float(gate), float(p.depth), half),
-             (float(fx), float(fy), float(cx), float(cy)), out, min_rows=16)
+    run_rows(_choose_least_rows, h, z, *choice_inputs(z, fx, fy, cx, cy, p), out, min_rows=16)
     return out

@@ -1,0 +1,175 @@
+"""The noise model of real sensors and the measured support of the noisy branch
+(ddm/noise.py's plateau search, ddm/support.py, auto's choice between the two noisy branches).
+
+Synthetic inputs with a known answer (a quantised plane, correlated noise), the kinect_v1
+sensor model of the synthetic benchmark, and the real frames of ``shared/data/real-sensors``
+(skipped when that folder is absent)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import depthnormals as dn
+from depthnormals.analytic import make_scene, tilted_plane
+from depthnormals.ddm import auto, support
+from depthnormals.ddm.noise import QUANT_SHARE, noise_pass, quantisation_step
+from depthnormals.kernels.depth import prepare
+
+K = (525.0, 525.0, 319.5, 239.5)
+
+
+def _plane(normal=(0.0, -0.6, -0.8), distance=2.0, shape=(480, 640)):
+    return tilted_plane(normal, distance).render(shape=shape, K=K)
+
+
+def _kinect_quantised(depth, f=580.0, baseline=0.075, step=0.125):
+    """Kinect v1 style: disparity ``f b / z`` rounded to ``step`` px, back to depth."""
+    disp = np.round(f * baseline / depth / step) * step
+    return (f * baseline / disp).astype(np.float32)
+
+
+def _correlated(shape, sigma_px, window, seed):
+    """Unit-variance noise averaged over a ``window`` x ``window`` box (correlated over
+    ``window`` pixels), times ``sigma_px``."""
+    rng = np.random.default_rng(seed)
+    pad = window
+    n = rng.normal(size=(shape[0] + 2 * pad, shape[1] + 2 * pad))
+    c = np.cumsum(np.cumsum(np.pad(n, ((1, 0), (1, 0))), 0), 1)
+    box = (c[window:, window:] - c[:-window, window:] - c[window:, :-window] + c[:-window, :-window])
+    box = box[pad:pad + shape[0], pad:pad + shape[1]] / window
+    return sigma_px * box / box.std()
+
+
+def test_quantised_plane_reads_its_rounding_noise():
+    r = _plane()
+    q = _kinect_quantised(r.depth)
+    # the wrong reading: every second difference inside a plateau is 0, so the median is 0
+    z, cam = prepare(q, r.K, None)
+    p = noise_pass(z, cam.fx, cam.fy)
+    assert p.iid == 0.0
+    share, step = quantisation_step(z, cam.fx, cam.fy)
+    assert share >= QUANT_SHARE
+    # the step at the plane's depth: dz = z^2 q / (f b) -> footprints dz f / z = z q f / (f b) * f
+    zm = float(np.median(r.depth))
+    expected = zm * 0.125 / (580.0 * 0.075) * K[0]
+    assert step == pytest.approx(expected, rel=0.25)
+    sigma = dn.estimate_noise(q, r.K)
+    assert sigma == pytest.approx(step / math.sqrt(12.0), rel=1e-6)
+    assert sigma > 0.3
+
+
+def test_clean_and_iid_depth_are_not_quantised():
+    r = make_scene("demo-room").render()
+    assert dn.estimate_noise(r.depth, r.K) < auto.PLANES_NOISE
+    rng = np.random.default_rng(1)
+    noisy = r.depth + rng.normal(size=r.depth.shape) * 0.2 * r.depth / r.K.fx
+    z, cam = prepare(noisy, r.K, None)
+    p = noise_pass(z, cam.fx, cam.fy)
+    assert p.quant == 0.0
+    assert p.sigma == pytest.approx(0.2, rel=0.1)
+
+
+def test_quantised_plane_takes_the_measured_support_not_the_clean_branch():
+    r = _plane()
+    q = _kinect_quantised(r.depth)
+    n = dn.estimate_normals(q, r.K)
+    e = dn.angular_error(n, r.normals)[20:-20, 20:-20]
+    # the plane hypotheses fit the staircase: most normals face the camera (tens of degrees)
+    planes = dn.estimate_normals(q, r.K, selection="planes")
+    e_planes = dn.angular_error(planes, r.normals)[20:-20, 20:-20]
+    assert np.nanmean(e_planes) > 10.0
+    assert np.nanmean(e) < 1.5
+    fals = dn.estimate_normals(q, r.K, method="fals", window=11)
+    assert np.nanmean(e) < np.nanmean(dn.angular_error(fals, r.normals)[20:-20, 20:-20])
+
+
+@pytest.mark.parametrize("window", [1, 7])
+def test_excess_tells_independent_from_correlated_noise(window):
+    r = _plane(normal=(0.2, -0.5, -0.84))
+    noise = _correlated(r.depth.shape, 0.5, window, seed=3)
+    d = (r.depth * (1.0 + noise / r.K.fx)).astype(np.float32)
+    z, cam = prepare(d, r.K, None)
+    p = noise_pass(z, cam.fx, cam.fy)
+    prof = support.support_profile(z, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma)
+    if window == 1:
+        assert prof.excess() <= auto.EXCESS
+        # independent noise: the tuned box-fit, bit for bit
+        old = auto.box_select(z, None, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma, levels=p.tiles())
+        assert np.array_equal(dn.estimate_normals(d, r.K), old, equal_nan=True)
+    else:
+        # correlated noise: second differences see little of it, the fits a lot
+        assert prof.excess() > auto.EXCESS
+        assert prof.radius >= 8
+        n = dn.estimate_normals(d, r.K)
+        old = auto.box_select(z, None, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma)
+        e_new = np.nanmean(dn.angular_error(n, r.normals))
+        e_old = np.nanmean(dn.angular_error(old, r.normals))
+        assert e_new < 0.5 * e_old
+
+
+def test_predicted_error_matches_independent_noise():
+    # a plane with i.i.d. noise of 0.5 footprints: the pairs' measured error is the prediction
+    r = _plane(normal=(0.0, 0.0, -1.0))
+    rng = np.random.default_rng(7)
+    d = r.depth * (1.0 + 0.5 * rng.normal(size=r.depth.shape) / r.K.fx)
+    z, cam = prepare(d, r.K, None)
+    prof = support.support_profile(z, cam.fx, cam.fy, cam.cx, cam.cy, 0.5, target=0.0)
+    for rad, m, pr in zip(prof.radii, prof.measured, prof.predicted, strict=True):
+        if rad >= 2:
+            assert m == pytest.approx(pr, rel=0.3), rad
+    assert support.predicted_error(0.5, 4) == pytest.approx(
+        math.degrees(math.sqrt(math.pi / 2) * 0.5 / math.sqrt(81 * 4 * 5 / 3)))
+    # a window read on every second row and column has a quarter of the points: 2x the error
+    assert support.predicted_error(1.0, 8, 2) == pytest.approx(
+        2.0 * support.predicted_error(1.0, 8), rel=0.15)
+
+
+def test_depth_exponent_reads_the_growth_of_the_residual():
+    rng = np.random.default_rng(0)
+    z = rng.uniform(1.0, 4.0, 4000)
+    res = (z / 2.0) ** 2 * rng.uniform(0.9, 1.1, z.size)
+    zref, gamma = support.depth_exponent(res, z)
+    assert gamma == pytest.approx(2.0, abs=0.15)
+    assert zref == pytest.approx(np.median(z))
+    assert support.depth_exponent(np.ones(100), np.full(100, 2.0))[1] == 0.0
+
+
+def test_fast_choice_agrees_with_the_per_pixel_reference():
+    r = make_scene("box-on-floor").render(shape=(120, 160), K=(130.0, 130.0, 79.5, 59.5))
+    noise = _correlated(r.depth.shape, 0.8, 5, seed=11)
+    d = (r.depth * (1.0 + noise / 130.0)).astype(np.float32)
+    d[40:50, 60:90] = 0.0  # a hole
+    z, cam = prepare(d, r.K, None)
+    p = noise_pass(z, cam.fx, cam.fy)
+    prof = support.support_profile(z, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma)
+    fast = support.support_select(z, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma, profile=prof)
+    args = support.choice_inputs(z, cam.fx, cam.fy, cam.cx, cam.cy, prof)
+    ref = np.empty_like(fast)
+    for v in range(z.shape[0]):
+        for u in range(z.shape[1]):
+            ref[v, u] = support.choose_pixel(z, *args, v, u)
+    assert np.array_equal(fast, ref, equal_nan=True)
+    assert np.isnan(fast[45, 70]).all()
+    ok = np.isfinite(fast[..., 0])
+    assert np.allclose(np.linalg.norm(fast[ok], axis=-1), 1.0, atol=1e-5)
+
+
+def test_default_on_the_kinect_v1_model():
+    from depthnormals.synth.noise import kinect_v1_noise
+
+    r = make_scene("demo-room").render()
+    d = kinect_v1_noise(r.depth, r.normals, r.K, rng=np.random.default_rng(0))
+    assert dn.estimate_noise(d, r.K) > 0.3  # quantised: plateaus, never clean
+    ok = np.isfinite(d) & (d > 0)
+
+    def err(n):
+        e = dn.angular_error(n, r.normals)
+        e = np.minimum(e, 180.0 - e)[ok]
+        return float(np.nanmean(e))
+
+    ours = err(dn.estimate_normals(d, r.K))
+    assert ours < 0.7 * err(dn.estimate_normals(d, r.K, method="fals", window=11))
+    assert ours < 0.8 * err(dn.estimate_normals(d, r.K, method="pcl-average-3d-gradient"))

@@ -1,0 +1,100 @@
+"""The default 3f2n+ on the real sensor frames of ``shared/data/real-sensors`` (Kinect v1,
+Xtion, densified LiDAR): a noise estimate that never reads them as clean, and more accurate
+normals than the peers on their planes (the plane reference, docs/evaluation.md). Skipped
+when the shared folder is absent."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import depthnormals as dn
+from depthnormals.camera import as_intrinsics, backproject
+from depthnormals.ddm.auto import PLANES_NOISE
+from depthnormals.evaluate import plane_reference, score_planes, sensor_threshold
+
+FOLDERS = ("kitti_road_lidar_sne_roadseg", "nyu_raw_kinect1_open3d", "nyu_registered_kinect1_slambook",
+           "sunrgbd_open3d", "tum_fr2_kinect1_slambook", "tum_kinect1_open3d")
+
+
+@pytest.fixture(scope="module")
+def frames(shared_data):
+    out = {}
+    for name in FOLDERS:
+        out[name] = list(dn.datasets.open(shared_data / "real-sensors" / name))
+        assert out[name], name
+    return out
+
+
+def _facing(n, depth, K):
+    """Peers' normals turned to face the camera (their sign is arbitrary), zero -> NaN."""
+    n = np.asarray(n, dtype=np.float64).copy()
+    n[~(np.abs(n).sum(-1) > 0)] = np.nan
+    X = backproject(depth, K)
+    flip = np.einsum("hwc,hwc->hw", n, X) > 0
+    n[flip] *= -1.0
+    return n
+
+
+def _opencv_fals(window):
+    def run(depth, K):
+        import cv2
+
+        Km = as_intrinsics(K).matrix
+        h, w = depth.shape
+        est = cv2.rgbd.RgbdNormals_create(h, w, cv2.CV_32F, np.asarray(Km, np.float64), window,
+                                          cv2.rgbd.RgbdNormals_RGBD_NORMALS_METHOD_FALS)
+        pts = cv2.rgbd.depthTo3d(np.nan_to_num(np.asarray(depth, np.float32)), np.asarray(Km, np.float64))
+        return est.apply(pts)
+
+    return run
+
+
+PEERS = {
+    "fals-11": lambda d, K: dn.estimate_normals(d, K, method="fals", window=11),
+    "pcl-average-3d-gradient": lambda d, K: dn.estimate_normals(d, K, method="pcl-average-3d-gradient"),
+    "opencv-fals-7": _opencv_fals(7),
+}
+
+
+def test_noise_is_never_zero_and_steady_per_sensor(frames):
+    for name, fs in frames.items():
+        levels = [dn.estimate_noise(f.depth, f.K) for f in fs]
+        # every frame reads noisy: quantised Kinect depth used to read exactly 0 (the clean branch)
+        assert min(levels) > 10 * PLANES_NOISE, (name, levels)
+        # frames of one sensor agree (the NYU registered five within 20 %)
+        assert max(levels) <= 1.2 * min(levels), (name, levels)
+
+
+@pytest.fixture(scope="module")
+def scores(frames):
+    """Interior / rim mean error per folder and method, on the first frame of each folder
+    (the plane reference costs seconds a frame; benchmarks/real_sensors.py scores them all)."""
+    pytest.importorskip("cv2")
+    table = {}
+    for name, fs in frames.items():
+        rows = {}
+        for f in fs[:1]:
+            ref = plane_reference(f.depth, f.K, threshold=sensor_threshold(f.meta))
+            for label, fn in {"3f2n+": lambda d, K: dn.estimate_normals(d, K), **PEERS}.items():
+                n = fn(f.depth, f.K)
+                s = score_planes(_facing(n, f.depth, f.K), ref)
+                rows.setdefault(label, []).append((s["interior_mean"], s["rim_mean"]))
+        table[name] = {k: np.nanmean(np.array(v), axis=0) for k, v in rows.items()}
+    return table
+
+
+@pytest.mark.parametrize("peer", sorted(PEERS))
+def test_default_beats_the_peers_on_every_folder(scores, peer):
+    for name, row in scores.items():
+        ours, theirs = row["3f2n+"], row[peer]
+        assert ours[0] < theirs[0], (name, "interior", ours, theirs)
+        assert ours[1] < theirs[1], (name, "rim", ours, theirs)
+
+
+def test_mean_over_folders(scores):
+    ours = np.mean([row["3f2n+"] for row in scores.values()], axis=0)
+    # all frames: 4.6 / 13.4 deg (docs/benchmarks.md, real sensors); the bounds leave room for
+    # the reference's RANSAC seeds, not for a regression to the old default (25.9 / 36.6)
+    assert ours[0] < 6.0
+    assert ours[1] < 15.0
