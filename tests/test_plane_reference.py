@@ -41,7 +41,7 @@ def _plane_errors(ref: PlaneReference, truth: np.ndarray) -> list[float]:
 
 def test_exact_box_on_floor():
     r = make_scene("box-on-floor").render()
-    ref = plane_reference(r.depth, r.K)
+    ref = plane_reference(r.depth, r.K, consensus=1)
     assert ref.n_planes >= 4  # floor, wall, two box faces
     # the box faces keep a 1-2 px band of the unextracted top face at their crease (inside the
     # 1 cm threshold): their fits tilt by a few hundredths of a degree
@@ -67,7 +67,7 @@ def test_small_faces_take_back_their_band():
 
     r = Scene([Plane((0.0, -1.0, 0.0), -1.0), Plane((0.0, 0.0, -1.0), -6.0),
                Box((0.0, 0.9, 3.0), (0.2, 0.1, 0.2))]).render()
-    ref = plane_reference(r.depth, r.K)
+    ref = plane_reference(r.depth, r.K, consensus=1)
     assert ref.n_planes == 2  # floor and wall
     err = angular_error(r.normals, ref.normal_map())
     assert not (ref.interior & (err > 1.0)).any()
@@ -75,7 +75,7 @@ def test_small_faces_take_back_their_band():
     old = planes.COMPETITOR_FRACTION
     try:
         planes.COMPETITOR_FRACTION = 0.01  # no competitors below the reference size
-        worse = plane_reference(r.depth, r.K)
+        worse = plane_reference(r.depth, r.K, consensus=1)
     finally:
         planes.COMPETITOR_FRACTION = old
     err = angular_error(r.normals, worse.normal_map())
@@ -84,7 +84,7 @@ def test_small_faces_take_back_their_band():
 
 def test_sphere_is_not_a_plane():
     r = make_scene("demo-room").render()
-    ref = plane_reference(r.depth, r.K)
+    ref = plane_reference(r.depth, r.K, consensus=1)
     sphere = ~r.planar & (r.depth > 0)
     assert ((ref.labels >= 0) & sphere).sum() < 0.01 * sphere.sum()
 
@@ -94,7 +94,7 @@ def test_noisy_quantised_planes(scene):
     r = make_scene(scene).render()
     z = _kinect(r.depth, seed=3)
     # the staircase is there: steps of >= 1 cm at 2 m and beyond
-    ref = plane_reference(z, r.K, seed=1)
+    ref = plane_reference(z, r.K, seed=1, consensus=1)
     assert ref.n_planes >= 3
     errs = _plane_errors(ref, r.normals)
     big = [e for e, p in zip(errs, ref.planes, strict=True) if p.n_interior > 20000]
@@ -108,10 +108,27 @@ def test_tilted_plane_staircase():
     z = _kinect(r.depth, seed=0, sigma_z2=0.0)
     steps = np.unique(np.round(z[240, 300:340], 6))
     assert np.diff(steps).min() > 0.01  # the disparity steps exceed 1 cm here
-    ref = plane_reference(z, r.K)
+    ref = plane_reference(z, r.K, consensus=1)
     assert ref.n_planes == 1
     assert _plane_errors(ref, r.normals)[0] < 0.05
     assert ref.planes[0].n_pixels > 0.95 * 480 * 640
+
+
+def test_consensus_keeps_what_the_runs_agree_on(shared_data):
+    root = shared_data / "real-sensors" / "tum_kinect1_open3d"
+    if not root.is_dir():
+        pytest.skip(f"{root} is absent")
+    from depthnormals.datasets import open as open_dataset
+
+    f = next(open_dataset(root))
+    one = plane_reference(f.depth, f.K, seed=4, consensus=1)
+    three = plane_reference(f.depth, f.K, seed=4)  # default: three runs, seeds 4, 5, 6
+    assert three.settings["consensus"] == 3
+    on = three.labels >= 0
+    assert on.sum() > 0.05 * f.depth.size and on.sum() <= (one.labels >= 0).sum()
+    # the planes are the first run's (those that keep enough agreed pixels)
+    for n in three.normals:
+        assert np.min(np.degrees(np.arccos(np.clip(one.normals @ n, -1, 1)))) < 1e-3
 
 
 def test_deterministic_for_a_seed():
@@ -131,7 +148,7 @@ def _square():
 
 def test_square_interior_and_rim():
     depth, K = _square()
-    ref = plane_reference(depth, K, min_fraction=0.05)
+    ref = plane_reference(depth, K, min_fraction=0.05, consensus=1)
     assert ref.n_planes == 1
     assert np.allclose(ref.normals[0], [0, 0, -1]) and np.isclose(ref.offsets[0], 2.0)
     square = depth > 0
@@ -146,7 +163,7 @@ def test_square_interior_and_rim():
 
 def test_score_exact_numbers():
     depth, K = _square()
-    ref = plane_reference(depth, K, min_fraction=0.05)
+    ref = plane_reference(depth, K, min_fraction=0.05, consensus=1)
     est = np.zeros((60, 80, 3))
     est[..., 2] = -1.0
     t = np.radians(10.0)
@@ -169,14 +186,14 @@ def test_score_exact_numbers():
 
 
 def test_no_plane_and_bad_input():
-    ref = plane_reference(np.zeros((30, 40)), (30.0, 30.0, 19.5, 14.5))
+    ref = plane_reference(np.zeros((30, 40)), (30.0, 30.0, 19.5, 14.5), consensus=1)
     assert ref.n_planes == 0 and (ref.labels == -1).all()
     s = score_planes(np.zeros((30, 40, 3)), ref)
     assert np.isnan(s["interior_mean"]) and np.isnan(s["coverage"]) and s["n_interior"] == 0
     with pytest.raises(TypeError, match="threshold"):
-        plane_reference(np.ones((30, 40)), (30.0, 30.0, 19.5, 14.5), threshold=0.01)
+        plane_reference(np.ones((30, 40)), (30.0, 30.0, 19.5, 14.5), threshold=0.01, consensus=1)
     with pytest.raises(TypeError, match="depth_scale"):
-        plane_reference(np.ones((30, 40), np.uint16), (30.0, 30.0, 19.5, 14.5))
+        plane_reference(np.ones((30, 40), np.uint16), (30.0, 30.0, 19.5, 14.5), consensus=1)
     with pytest.raises(TypeError, match="PlaneReference"):
         score_planes(np.zeros((30, 40, 3)), {"labels": None})
     with pytest.raises(ValueError):
@@ -259,7 +276,7 @@ def test_real_frames_have_planes(shared_data):
 
     n = 0
     for f in open_dataset(root):
-        ref = plane_reference(f.depth, f.K, threshold=sensor_threshold(f.meta))
+        ref = plane_reference(f.depth, f.K, threshold=sensor_threshold(f.meta), consensus=1)
         assert ref.n_planes >= 2, (f.group, f.name)
         assert ref.interior.sum() > 0.05 * f.depth.size, (f.group, f.name)
         assert all(p.rms_ratio <= 0.45 for p in ref.planes)

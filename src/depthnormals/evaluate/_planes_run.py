@@ -138,7 +138,7 @@ def run_plane_evaluation(dataset: Any, methods: str | Sequence[str | MethodSpec]
                          out: str | Path, *,
                          method_options: Mapping[str, Mapping[str, Any]] | None = None,
                          frames: int | None = None, figures: bool = True, seed: int = 0,
-                         threshold: tuple[float, float] | None = None,
+                         threshold: tuple[float, float] | None = None, consensus: int = 3,
                          threads: int | None = None, progress: bool = False,
                          dataset_name: str | None = None) -> PlaneEvaluationResult:
     """Score methods on the plane reference of every frame of a dataset (no ground truth).
@@ -168,6 +168,8 @@ def run_plane_evaluation(dataset: Any, methods: str | Sequence[str | MethodSpec]
         Seed of the plane reference's RANSAC.
     threshold : (float, float), optional
         Inlier threshold of every frame's reference (default: per frame, from its sensor).
+    consensus : int, default 3
+        Runs of the plane search that must agree (:func:`plane_reference`).
     threads : int, optional
         Threads of the estimators during the run (restored afterwards).
     progress : bool, default False
@@ -209,7 +211,8 @@ def run_plane_evaluation(dataset: Any, methods: str | Sequence[str | MethodSpec]
             if frames is not None and i >= frames:
                 break
             thr = threshold if threshold is not None else sensor_threshold(frame.meta)
-            ref = plane_reference(frame.depth, frame.K, seed=seed, threshold=thr)
+            ref = plane_reference(frame.depth, frame.K, seed=seed, threshold=thr,
+                                  consensus=consensus)
             entry = _frame_entry(frame, ref)
             entry["scores"], errors = _score_frame(frame, specs, ref, warmed)
             entries.append(entry)
@@ -231,7 +234,8 @@ def run_plane_evaluation(dataset: Any, methods: str | Sequence[str | MethodSpec]
     settings = {"version": __version__, "dataset": dataset_id, "reference": "planes",
                 "methods": [{"label": s.label, "method": s.method, "options": s.options}
                             for s in specs],
-                "seed": seed, "threshold": None if threshold is None else list(threshold),
+                "seed": seed, "consensus": consensus,
+                "threshold": None if threshold is None else list(threshold),
                 "errors": "signed", "threads": used, "machine": machine_description(),
                 "started": started,
                 "finished": datetime.now(timezone.utc).isoformat(timespec="seconds")}
