@@ -44,6 +44,7 @@ MAX_RMS_RATIO = 0.45
 #: floor's band climbs about 10 px up the side). At most COMPETITORS_PER_PLANE * max_planes
 #: planes are extracted.
 COMPETITOR_FRACTION = 0.0025
+COMPETITORS_PER_PLANE = 4
 #: Extraction stops after this many rejected planes in a row.
 MAX_FAILURES = 5
 #: A region that fails the residual tests is grown again within this share of the threshold
@@ -59,7 +60,6 @@ REASSIGN_ROUNDS = 3
 #: is on their crease and is no reference (nearly coplanar planes, e.g. one floor split in two
 #: regions, share their pixels without a gap).
 AMBIGUOUS_DEG = 10.0
-COMPETITORS_PER_PLANE = 4
 #: The threshold for LiDAR depth, whose noise does not grow with z^2: 5 cm everywhere, 2.5
 #: times the 2 cm range accuracy of a Velodyne HDL-64E (the densified KITTI frames add
 #: interpolation between scan lines). :func:`sensor_threshold` picks it for a sensor text
