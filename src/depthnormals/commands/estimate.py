@@ -29,8 +29,9 @@ FIRST_RUN_S = 12
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("depth", type=Path, nargs="+",
-                        help="depth file: .npy, .png (16-bit), .tif, .bin; or many: files, globs "
-                             "('seq/*.png'), folders, dataset folders (then -o is a folder)")
+                        help="depth file: .npy, .png (16-bit), .pgm (NYU raw), .tif, .bin; or many: files, "
+                             "globs ('seq/*.png'), folders, dataset folders (then -o is a folder; "
+                             "colour images found there are skipped and counted)")
     parser.add_argument("--intrinsics", "-K", type=Path, default=None,
                         help="camera file: .json/.yaml (fx, fy, cx, cy, K or P; ROS camera_info; Open3D "
                              "intrinsic_matrix; optional depth_scale, invalid, max_depth) or .txt (3x3 K, "
@@ -61,7 +62,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     many.add_argument("--format", default="npy", choices=("npy", "png", "vis.png", "ply"),
                       help="output format of each frame (default npy)")
     many.add_argument("--no-resume", action="store_true",
-                      help="recompute frames whose output exists (default: skip them)")
+                      help="recompute every frame, also over outputs of other settings (default: "
+                           "skip outputs whose folder manifest holds the same settings, refuse "
+                           "a folder made with other ones)")
     many.add_argument("--quiet", "-q", action="store_true", help="no progress")
     many.add_argument("--scheduler", default=None, metavar="ADDRESS",
                       help="run on Dask: local, local:N (N worker processes) or tcp://host:port of "
