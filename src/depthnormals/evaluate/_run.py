@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import re
 import time
+import warnings
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -19,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from .._progress import Progress
+from .._validate import NoValidNormalWarning
 from ..datasets import Frame
 from ._env import machine_description
 from ._methods import MethodSpec, resolve_methods
@@ -263,7 +265,9 @@ def _estimate(spec: MethodSpec, frame: Frame, warmed: set[str]) -> tuple[np.ndar
 
     if spec.label not in warmed:
         crop = np.ascontiguousarray(frame.depth[:_WARMUP_PX, :_WARMUP_PX])
-        estimate_normals(crop, frame.K, method=spec.method, **spec.options)
+        with warnings.catch_warnings():  # the corner may hold no valid depth (KITTI): not news
+            warnings.simplefilter("ignore", NoValidNormalWarning)
+            estimate_normals(crop, frame.K, method=spec.method, **spec.options)
         warmed.add(spec.label)
     t0 = time.perf_counter()
     est = estimate_normals(frame.depth, frame.K, method=spec.method, **spec.options)
