@@ -299,3 +299,19 @@ def test_evaluate_warm_up_on_an_empty_corner_does_not_warn(tmp_path, capsys):
     np.save(path, z)
     assert main(["evaluate", str(tmp_path / "ds"), "-m", "3f2n", "-o", str(tmp_path / "ev"), "-q",
                  "--figures", "0"]) == 0
+
+
+def test_camera_file_of_a_real_sensor_folder(tmp_path, depth, capsys):
+    """The real-sensor folder reader's intrinsics.json spells the codes invalid_value; an
+    encoding other than linear depth is refused for a single file (no silent misreading)."""
+    info = {"fx": 50.0, "fy": 50.0, "cx": 23.5, "cy": 17.5, "depth_scale": 0.001, "invalid_value": 65535}
+    (tmp_path / "intrinsics.json").write_text(json.dumps(info))
+    assert io.read_camera_file(tmp_path / "intrinsics.json").invalid == (65535.0,)
+    mm = np.round(depth * 1000).astype(np.uint16)
+    (tmp_path / "d.png").write_bytes(encode_png(mm))
+    argv = ["estimate", str(tmp_path / "d.png"), "-K", str(tmp_path / "intrinsics.json"), "-o",
+            str(tmp_path / "n.npy")]
+    assert main(argv) == 0
+    (tmp_path / "intrinsics.json").write_text(json.dumps({**info, "encoding": "nyu_raw_disparity"}))
+    assert main(argv) == 1
+    assert "nyu_raw_disparity" in capsys.readouterr().err

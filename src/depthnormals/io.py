@@ -316,12 +316,20 @@ class CameraFile:
     depth_scale : float or None
         Metres per unit of the integer depth images (key ``depth_scale``).
     invalid : tuple of float
-        Raw depth values that mark invalid pixels (key ``invalid``, e.g. ``[65535]`` or
+        Raw depth values that mark invalid pixels (key ``invalid``, or ``invalid_value`` as
+        the real-sensor folder reader spells it; a number or a list, e.g. ``[65535]`` or
         ``[0, 2047]``), compared before scaling.
     max_depth : float or None
         Depth beyond this many metres is invalid (key ``max_depth``).
     source : Path
         The file read.
+    encoding : str or None
+        How raw values become depth (key ``encoding``): ``"linear"`` (``value * depth_scale``)
+        or a name a dataset reader knows (``"nyu_raw_disparity"``, ...); None when the file
+        does not say. :func:`read_depth` reads linear depth only.
+    raw_format : str or None
+        The free-text ``raw_format`` note of a real-sensor folder's ``intrinsics.json``
+        (:func:`depthnormals.datasets.realsensors.encoding_of` reads an encoding from it).
     """
 
     K: Intrinsics
@@ -329,6 +337,8 @@ class CameraFile:
     invalid: tuple[float, ...] = ()
     max_depth: float | None = None
     source: Path | None = None
+    encoding: str | None = None
+    raw_format: str | None = None
 
 
 def read_camera_file(path: str | Path) -> CameraFile:
@@ -339,7 +349,8 @@ def read_camera_file(path: str | Path) -> CameraFile:
     - JSON or YAML with ``fx, fy, cx, cy`` (pixels, 0-based), ``K`` / ``k`` (3x3, nested or
       flat), or ``P`` / ``p`` (3x4 projection), optionally under a ``camera`` or
       ``intrinsics`` key; beside them, optional ``depth_scale`` (metres per unit),
-      ``invalid`` (list of raw values, e.g. ``[0, 65535]``) and ``max_depth`` (metres).
+      ``invalid`` (or ``invalid_value``: raw values, e.g. ``[0, 65535]``), ``max_depth``
+      (metres) and ``encoding`` (``"linear"`` unless a dataset reader says otherwise).
     - ROS ``camera_info`` YAML (``camera_calibration_parsers``: ``camera_matrix: {rows: 3,
       cols: 3, data: [...]}``, else ``projection_matrix``), and a ``camera_info`` message
       as ``rostopic echo`` / ``ros2 topic echo`` print it (``K: [...]`` / ``k: [...]``).
@@ -437,7 +448,7 @@ def _mapping_camera(data: dict, path: Path) -> CameraFile:
     for key in ("camera", "intrinsics"):
         if isinstance(data.get(key), dict):
             data = data[key]
-            extras.update({k: v for k, v in data.items() if k in ("depth_scale", "invalid", "max_depth")})
+            extras.update({k: v for k, v in data.items() if k in _EXTRAS})
     if "intrinsic_matrix" in data:  # Open3D PinholeCameraIntrinsic: column-major
         m = np.asarray(data["intrinsic_matrix"], dtype=np.float64)
         if m.size != 9:
@@ -456,7 +467,7 @@ def _mapping_camera(data: dict, path: Path) -> CameraFile:
     scale = extras.get("depth_scale")
     if scale is not None:
         scale = check_positive(scale, '"depth_scale"')
-    invalid = extras.get("invalid", ())
+    invalid = extras.get("invalid", extras.get("invalid_value", ()))
     if isinstance(invalid, (int, float)) and not isinstance(invalid, bool):
         invalid = [invalid]
     if not isinstance(invalid, (list, tuple)):
@@ -465,7 +476,15 @@ def _mapping_camera(data: dict, path: Path) -> CameraFile:
     max_depth = extras.get("max_depth")
     if max_depth is not None:
         max_depth = check_positive(max_depth, '"max_depth"')
-    return CameraFile(K, scale, codes, max_depth, path)
+    encoding = extras.get("encoding")
+    if encoding is not None and not isinstance(encoding, str):
+        raise ValueError(f'"encoding" must be a name such as "linear"; got {encoding!r}')
+    raw_format = extras.get("raw_format")
+    return CameraFile(K, scale, codes, max_depth, path, encoding,
+                      None if raw_format is None else str(raw_format))
+
+
+_EXTRAS = ("depth_scale", "invalid", "invalid_value", "max_depth", "encoding", "raw_format")
 
 
 def read_intrinsics(path: str | Path) -> Intrinsics:

@@ -128,12 +128,27 @@ def read_settings(args: argparse.Namespace, camera: Any) -> ReadSettings:
     file's ``depth_scale`` / ``invalid`` / ``max_depth`` (:func:`depthnormals.io.read_camera_file`)."""
     from .._validate import check_positive
 
+    encoding = _encoding(camera)
+    if encoding != "linear":
+        raise ValueError(f"{camera.source} declares the depth encoding {encoding!r}, which a depth file "
+                         "read with -K cannot decode (linear depth only); pass the folder that holds "
+                         "it as the input instead (its dataset reader decodes it), without -K")
     scale = args.depth_scale if args.depth_scale is not None else getattr(camera, "depth_scale", None)
     invalid = args.invalid if args.invalid is not None else getattr(camera, "invalid", ())
     max_depth = args.max_depth if args.max_depth is not None else getattr(camera, "max_depth", None)
     check_positive(scale, "--depth-scale", allow_none=True)
     check_positive(max_depth, "--max-depth", allow_none=True)
     return ReadSettings(scale, tuple(invalid), max_depth)
+
+
+def _encoding(camera: Any) -> str:
+    """The depth encoding a camera file declares (``"linear"`` unless it says otherwise)."""
+    if camera is None or (camera.encoding is None and camera.raw_format is None):
+        return "linear"
+    from ..datasets.realsensors import encoding_of
+
+    info = {"encoding": camera.encoding, "raw_format": camera.raw_format}
+    return encoding_of({k: v for k, v in info.items() if v is not None})
 
 
 def run_many(args: argparse.Namespace) -> int:
