@@ -137,24 +137,51 @@ def test_depth_exponent_reads_the_growth_of_the_residual():
     assert support.depth_exponent(np.ones(100), np.full(100, 2.0))[1] == 0.0
 
 
-def test_fast_choice_agrees_with_the_per_pixel_reference():
+def _reference_choice(z, args):
+    out = np.empty((*z.shape, 3), dtype=np.float32)
+    for v in range(z.shape[0]):
+        for u in range(z.shape[1]):
+            out[v, u] = support.choose_pixel(z, *args, v, u)
+    return out
+
+
+@pytest.mark.parametrize("radius", [3, 8])
+def test_fast_choice_agrees_with_the_per_pixel_reference(radius):
+    import dataclasses
+
+    from depthnormals._parallel import run_rows
+
     r = make_scene("box-on-floor").render(shape=(120, 160), K=(130.0, 130.0, 79.5, 59.5))
     noise = _correlated(r.depth.shape, 0.8, 5, seed=11)
     d = (r.depth * (1.0 + noise / 130.0)).astype(np.float32)
     d[40:50, 60:90] = 0.0  # a hole
     z, cam = prepare(d, r.K, None)
     p = noise_pass(z, cam.fx, cam.fy)
-    prof = support.support_profile(z, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma)
-    fast = support.support_select(z, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma, profile=prof)
+    prof = dataclasses.replace(support.support_profile(z, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma),
+                               radius=radius)
+    # the rows against the per-pixel reference, at full resolution
     args = support.choice_inputs(z, cam.fx, cam.fy, cam.cx, cam.cy, prof)
-    ref = np.empty_like(fast)
-    for v in range(z.shape[0]):
-        for u in range(z.shape[1]):
-            ref[v, u] = support.choose_pixel(z, *args, v, u)
-    assert np.array_equal(fast, ref, equal_nan=True)
-    assert np.isnan(fast[45, 70]).all()
-    ok = np.isfinite(fast[..., 0])
-    assert np.allclose(np.linalg.norm(fast[ok], axis=-1), 1.0, atol=1e-5)
+    fast = np.empty((*z.shape, 3), dtype=np.float32)
+    run_rows(support._choose_least_rows, z.shape[0], z, *args, fast, min_rows=16)
+    assert np.array_equal(fast, _reference_choice(z, args), equal_nan=True)
+    # the branch: below HALF_RADIUS those rows; from it on the choice of every 2x2 cell
+    out = support.support_select(z, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma, profile=prof)
+    if radius < support.HALF_RADIUS:
+        assert np.array_equal(out, fast, equal_nan=True)
+    else:
+        zd = np.ascontiguousarray(z[::2, ::2])
+        hargs = support.choice_inputs(zd, cam.fx / 2, cam.fy / 2, cam.cx / 2, cam.cy / 2, prof,
+                                      radius=radius // 2, score_scale=4.0)
+        zfill = np.where(np.isnan(zd), np.float32(prof.depth), zd)
+        half = _reference_choice(zfill, hargs)
+        up = np.repeat(np.repeat(half, 2, axis=0), 2, axis=1)[:z.shape[0], :z.shape[1]]
+        ok = np.isfinite(out[..., 0])
+        # the same window's normal, turned toward each pixel's own ray
+        assert np.array_equal(ok, np.isfinite(z) & np.isfinite(up[..., 0]))
+        assert np.allclose(np.abs(out[ok]), np.abs(up[ok]), atol=0.0)
+    assert np.isnan(out[45, 70]).all()
+    ok = np.isfinite(out[..., 0])
+    assert np.allclose(np.linalg.norm(out[ok], axis=-1), 1.0, atol=1e-5)
 
 
 def test_default_on_the_kinect_v1_model():

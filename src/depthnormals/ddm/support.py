@@ -71,6 +71,8 @@ BIG_FACTOR = 2.0
 #: Largest exponent of the residual's growth with depth (Kinect-like noise, ``sigma_z ~ z^2``,
 #: gives ``sigma ~ z`` in footprints and a variance ~ ``z^2``).
 MAX_EXPONENT = 2.0
+#: From this radius on the branch runs on every second row and column (:func:`support_select`).
+HALF_RADIUS = 6
 #: A sampled window needs this share of valid pixels.
 MIN_VALID = 0.6
 #: Fewest pairs for a radius to be measured.
@@ -346,6 +348,12 @@ def _choose_least_rows(v0, v1, z, fits, big, shift, gates, cam, out):
     best = np.empty(w, dtype=np.float32)
     fac = np.ones(w, dtype=np.float32)
     kk = np.zeros(w, dtype=np.int32)
+    gx = np.empty(w, dtype=np.float32)
+    gy = np.empty(w, dtype=np.float32)
+    gz = np.empty(w, dtype=np.float32)
+    dvk = shift * SHIFTS[:, 0]
+    duk = shift * SHIFTS[:, 1]
+    rx = ((np.arange(w) - cx) / fx).astype(np.float32)
     nan = np.float32(np.nan)
     for v in range(v0, v1):
         srow = score[v]
@@ -368,45 +376,52 @@ def _choose_least_rows(v0, v1, z, fits, big, shift, gates, cam, out):
             lo = max(0, -du)
             hi = min(w, w - du)
             _least(score[r, lo + du:hi + du], best[lo:hi], kk[lo:hi], np.int32(k))
-        for u in range(w):
-            if not (zrow[u] == zrow[u]) or not (best[u] < np.inf):
-                out[v, u, 0] = nan
-                out[v, u, 1] = nan
-                out[v, u, 2] = nan
-                continue
-            if use_big and big_s[v >> 1, u >> 1] <= gb * fac[u]:
-                nx = big_n[0, v >> 1, u >> 1]
-                ny = big_n[1, v >> 1, u >> 1]
-                nz = big_n[2, v >> 1, u >> 1]
-            else:
-                k = kk[u]
-                r = v + shift * SHIFTS[k, 0]
-                c = u + shift * SHIFTS[k, 1]
-                nx = fit_n[0, r, c]
-                ny = fit_n[1, r, c]
-                nz = fit_n[2, r, c]
-            if nx * ((u - cx) / fx) + ny * ((v - cy) / fy) + nz > 0.0:
-                nx = -nx
-                ny = -ny
-                nz = -nz
-            out[v, u, 0] = nx
-            out[v, u, 1] = ny
-            out[v, u, 2] = nz
+        vb = min(v >> 1, big_s.shape[0] - 1)
+        for u in range(w):  # the chosen window's normal (a gather)
+            k = kk[u]
+            r = v + dvk[k]
+            c = min(max(u + duk[k], 0), w - 1)
+            r = min(max(r, 0), h - 1)
+            gx[u] = fit_n[0, r, c]
+            gy[u] = fit_n[1, r, c]
+            gz[u] = fit_n[2, r, c]
+        if use_big:  # the large window where it is one plane within the gate
+            bs_row = big_s[vb]
+            for u in range(w):
+                take = bs_row[u >> 1] <= gb * fac[u]
+                gx[u] = big_n[0, vb, u >> 1] if take else gx[u]
+                gy[u] = big_n[1, vb, u >> 1] if take else gy[u]
+                gz[u] = big_n[2, vb, u >> 1] if take else gz[u]
+        ry = np.float32((v - cy) / fy)
+        for u in range(w):  # facing the pixel's ray; NaN at invalid depth or without a fit
+            ok = (zrow[u] == zrow[u]) & (best[u] < np.inf)
+            x = gx[u]
+            y = gy[u]
+            t = gz[u]
+            sg = np.float32(-1.0) if x * rx[u] + y * ry + t > 0.0 else np.float32(1.0)
+            out[v, u, 0] = x * sg if ok else nan
+            out[v, u, 1] = y * sg if ok else nan
+            out[v, u, 2] = t * sg if ok else nan
 
 
 def choice_inputs(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
-                  profile: SupportProfile) -> tuple:
+                  profile: SupportProfile, *, radius: int | None = None,
+                  score_scale: float = 1.0) -> tuple:
     """The arguments of the window choice after the rows (``fits, big, shift, gates, cam``):
-    the box-fit passes at the profile's radius and at the large radius (half resolution)."""
-    r = profile.radius
+    the box-fit passes over ``z`` at ``radius`` (default the profile's) and at the large
+    radius on every second row and column. ``score_scale`` turns the residual variances of
+    ``z``'s footprints into those of the profile (4 when ``z`` is the full image read on every
+    second row and column)."""
+    r = profile.radius if radius is None else radius
     big = min(MAX_RADIUS, round(BIG_FACTOR * r))
-    gate = GATE * profile.residual_at(r)
+    gate = GATE * profile.residual_at(profile.radius)
     w = z.shape[1]
-    fits = box_fit_windows(z, fx, fy, cx, cy, r)
+    n, sc = box_fit_windows(z, fx, fy, cx, cy, r)
+    fits = (n, sc * np.float32(score_scale)) if score_scale != 1.0 else (n, sc)
     if big > r:  # on every second row and column: a quarter of the cost
         zd = np.ascontiguousarray(z[::2, ::2])
         bn, bs = box_fit_windows(zd, 0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy, (big + 1) // 2)
-        bigs = (bn, bs * np.float32(4.0))  # footprints of the full image
+        bigs = (bn, bs * np.float32(4.0 * score_scale))  # footprints of the profile
     else:
         bigs = (fits[0][:, :1], np.full((1, w), np.inf, dtype=np.float32))
     half = round(2.0 * profile.exponent) if profile.depth == profile.depth else 0
@@ -414,13 +429,53 @@ def choice_inputs(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
     return fits, bigs, int(r), gates, (float(fx), float(fy), float(cx), float(cy))
 
 
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _upsample_rows(v0, v1, z, half, cam, out):
+    """Rows ``[v0, v1)``: pixel (v, u) takes the normal of ``half`` at (v // 2, u // 2) (the
+    choice made on every second row and column), turned toward its own ray; NaN where its
+    depth is invalid or ``half`` has none."""
+    fx, fy, cx, cy = cam
+    w = z.shape[1]
+    nan = np.float32(np.nan)
+    rx = ((np.arange(w) - cx) / fx).astype(np.float32)
+    for v in range(v0, v1):
+        hr = half[v >> 1]
+        zrow = z[v]
+        ry = np.float32((v - cy) / fy)
+        for u in range(w):
+            x = hr[u >> 1, 0]
+            y = hr[u >> 1, 1]
+            t = hr[u >> 1, 2]
+            ok = zrow[u] == zrow[u]
+            sg = np.float32(-1.0) if x * rx[u] + y * ry + t > 0.0 else np.float32(1.0)
+            out[v, u, 0] = x * sg if ok else nan
+            out[v, u, 1] = y * sg if ok else nan
+            out[v, u, 2] = t * sg if ok else nan
+
+
 def support_select(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
                    sigma: float, *, profile: SupportProfile | None = None) -> np.ndarray:
     """The noisy branch on prepared depth ``z`` (module doc): normals (H, W, 3) float32, NaN
     at invalid depth and where no window has a fit. ``sigma``: the noise level
-    (footprints); ``profile``: the measured support when already known."""
+    (footprints); ``profile``: the measured support when already known.
+
+    From radius :data:`HALF_RADIUS` on, the windows and the choice run on every second row
+    and column (windows of radius ``r / 2`` there: the same extent) and every pixel takes the
+    choice of its 2x2 cell: a window of 13 pixels or more loses little by it, and the branch
+    costs about a third."""
     p = support_profile(z, fx, fy, cx, cy, sigma) if profile is None else profile
     h, w = z.shape
     out = np.empty((h, w, 3), dtype=np.float32)
-    run_rows(_choose_least_rows, h, z, *choice_inputs(z, fx, fy, cx, cy, p), out, min_rows=16)
+    if p.radius < HALF_RADIUS:
+        run_rows(_choose_least_rows, h, z, *choice_inputs(z, fx, fy, cx, cy, p), out, min_rows=16)
+        return out
+    zd = np.ascontiguousarray(z[::2, ::2])
+    cam = (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy)
+    args = choice_inputs(zd, *cam, p, radius=round(p.radius / 2), score_scale=4.0)
+    # the choice reads depth only for the gates' growth and for validity: every cell chooses
+    zfill = np.where(np.isnan(zd), zd.dtype.type(p.depth if p.depth == p.depth else 1.0), zd)
+    half = np.empty((zd.shape[0], zd.shape[1], 3), dtype=np.float32)
+    run_rows(_choose_least_rows, zd.shape[0], zfill, *args, half, min_rows=8)
+    run_rows(_upsample_rows, h, z, half, (float(fx), float(fy), float(cx), float(cy)), out,
+             min_rows=16)
     return out
