@@ -31,8 +31,8 @@ from ..camera import Intrinsics
 from ._common import depth_mask, resolve_intrinsics
 from ._frame import Frame
 
-__all__ = ["ENCODINGS", "decode_nyu_disparity", "decode_sunrgbd", "is_realsensors", "read_pgm",
-           "read_realsensors"]
+__all__ = ["ENCODINGS", "decode_nyu_disparity", "decode_sunrgbd", "encoding_of", "is_realsensors",
+           "read_pgm", "read_realsensors"]
 
 #: Depth encodings of :func:`read_realsensors` (``"encoding"`` in ``intrinsics.json``).
 ENCODINGS = ("linear", "nyu_raw_disparity", "sunrgbd_rotated")
