@@ -18,9 +18,11 @@ from ._parallel import get_num_threads, set_num_threads
 from ._validate import NoValidNormalWarning
 from .camera import Intrinsics, as_intrinsics, backproject
 from .ddm import (
+    NoiseProfile,
     discontinuity_discrimination,
     estimate_noise,
     estimate_noise_map,
+    noise_profile,
 )
 from .estimators import (
     angle_weighted,
@@ -47,6 +49,7 @@ __version__ = "0.1.0"
 __all__ = [
     "Intrinsics",
     "NoValidNormalWarning",
+    "NoiseProfile",
     "NormalMetrics",
     "__version__",
     "angle_weighted",
@@ -67,6 +70,7 @@ __all__ = [
     "io",
     "line_mod",
     "methods",
+    "noise_profile",
     "normal_metrics",
     "pcl_integral_image",
     "plane_pca",

@@ -14,6 +14,7 @@ from ._module import (
     module_defaults,
     renamed_option_error,
 )
+from .auto import NoiseProfile, noise_profile
 from .boxfit import box_fit_normals
 from .correlation import CORRELATIONS, kendall_map
 from .curvature import CURVATURES, DERIVATIVES, depth_curvature
@@ -28,6 +29,7 @@ __all__ = [
     "NEIGHBOURHOODS",
     "RENAMED",
     "ModuleOptions",
+    "NoiseProfile",
     "box_fit_normals",
     "depth_curvature",
     "discontinuity_discrimination",
@@ -36,6 +38,7 @@ __all__ = [
     "fused_plus",
     "kendall_map",
     "module_defaults",
+    "noise_profile",
     "plane_normals",
     "renamed_option_error",
 ]
