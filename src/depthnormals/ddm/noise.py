@@ -324,10 +324,11 @@ def estimate_noise(depth: Any, K: Any, *, depth_scale: float | None = None) -> f
     """Standard deviation of the depth noise, in pixel footprints ``z / f``, from one image.
 
     The median absolute second difference of inverse depth (zero on every plane), scaled to
-    footprints and divided by ``0.6745 sqrt(6)`` (the MAD rule for Gaussian noise); see the
-    module doc. Depth jumps and creases, a minority of the pixels, do not move the median.
-    Samples every 12th row (and column, vertically): about 29k triples on 640x480 (the
-    samples of :func:`estimate_noise_map`, read in the same pass).
+    footprints and divided by ``0.6745 sqrt(6)`` (the MAD rule for Gaussian noise), and the
+    rounding noise of quantised depth in quadrature; see the module doc. Depth jumps and
+    creases, a minority of the pixels, do not move the median. Samples every 12th row (and
+    column, vertically): about 29k triples on 640x480 (the samples of
+    :func:`estimate_noise_map`, read in the same pass).
 
     Parameters
     ----------
@@ -342,19 +343,23 @@ def estimate_noise(depth: Any, K: Any, *, depth_scale: float | None = None) -> f
     Returns
     -------
     sigma : float
-        Noise in footprints (``sigma_z f / z``): ~1e-4 on float32 renders, 0.1 for the
-        Gaussian noise of the analytic benchmark, ~0.2-0.5 for a Kinect v2 at 1-4 m.
+        Noise in footprints (``sigma_z f / z``): ~1e-4 or 0 on float32 renders, 0.1 for the
+        Gaussian noise of the analytic benchmark, ~0.2-0.5 for a Kinect v2 at 1-4 m,
+        0.6-1.6 on real Kinect v1 depth (quantised), never 0 on real sensor depth.
         NaN when no three consecutive valid pixels exist. Unit-free: the same for depth in
         metres or millimetres.
 
     Notes
     -----
-    Ours (issue 13), used by ``selection="auto"``, the default of
+    Ours, used by ``selection="auto"``, the default of
     :func:`depthnormals.discontinuity_discrimination` and so of every ``"<name>+"`` method:
-    below 0.001 footprints it takes the plane hypotheses (clean depth), above the box-fit
-    (docs/3f2n-plus.md); with the paper's CRF or a correlation, below 0.03 the curvature
-    selection. Quantised depth (e.g. 1 mm steps) reads as its rounding noise where it exceeds
-    the sensor's.
+    below 0.001 footprints it takes the plane hypotheses (clean depth), above it a box-fit
+    (docs/3f2n-plus.md). Quantised depth (Kinect v1, Xtion, PrimeSense: disparity in 1/8 px
+    steps) reads as its rounding noise ``step / sqrt(12)`` added in quadrature to the
+    second-difference level (module doc): 0.6-1.6 footprints on the Kinect v1 frames of
+    ``shared/data/real-sensors``, where the second differences alone read exactly 0.
+    :func:`depthnormals.noise_profile` reports the parts separately, with the correlated
+    part the second differences cannot see.
 
     Examples
     --------
