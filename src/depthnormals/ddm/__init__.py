@@ -2,8 +2,18 @@
 
 ``discontinuity_discrimination(normals, depth, K, ...)`` refines the output of any estimator;
 ``estimate_normals(..., method="<name>+")`` runs estimator ``<name>`` followed by it.
+
+Two parts. **The paper's module** (``selection="curvature"``): ``curvature`` (the depth
+curvature), ``correlation`` (Kendall, Pearson), ``selection`` (stage 1), ``crf`` and
+``crf_ring`` (stage 3), ``_module`` (the entry point), ``threefn_plus`` (the fused 3f2n+).
+**Our adaptive selection** (the default ``selection="auto"``): ``noise`` (the noise estimate),
+``support`` (the support measured on the depth), ``boxfit`` (plane fits over box windows),
+``planes`` (plane hypotheses for clean depth), ``planefit``, and ``auto`` (which branch runs;
+``noise_profile``). docs/3f2n-plus.md says which measurement chose each.
+
 ``depth_curvature`` and ``kendall_map`` expose the two discriminators; ``plane_normals`` and
-``box_fit_normals`` the clean and noisy branches of the default ``selection="auto"``.
+``box_fit_normals`` the clean and noisy branches of the default; ``noise_profile`` what it
+reads of the noise.
 """
 
 from ._module import (

@@ -1,5 +1,7 @@
 """Box-fit: least-squares planes in inverse depth over box windows, at box-filter cost.
 
+Ours, not the paper's: the noisy branch of the default selection.
+
 A plane ``n . X = d`` seen by a pinhole camera makes inverse depth exactly linear in the
 pixel coordinates (NOTES section 2, 3F2N):
 

@@ -1,5 +1,7 @@
 """Depth noise in pixel footprints: the level that picks the support of the noise-aware 3F2N+.
 
+Ours, not the paper's (the 3F2N+ paper estimates no noise).
+
 On a plane, inverse depth ``w = 1 / z`` is exactly linear in the pixel coordinates
 (NOTES section 2, 3F2N), so its second difference ``w(u - 1) - 2 w(u) + w(u + 1)`` is zero;
 with independent depth noise of standard deviation ``sigma_z`` it has standard deviation

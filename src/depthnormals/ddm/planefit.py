@@ -1,5 +1,7 @@
 """Plane-fit selection: a noise-robust alternative to the curvature selection of 3F2N+.
 
+Ours, not the paper's.
+
 Every pixel ``q`` takes the normal of the candidate ``r`` (a valid pixel within ``radius`` of
 ``q``, ``q`` itself included) whose plane - through the point of ``r`` with the normal
 estimated at ``r`` - best explains the points around ``q``: the score of a candidate is the
