@@ -12,7 +12,13 @@ import pytest
 
 from depthnormals.analytic import make_scene, tilted_plane
 from depthnormals.evaluate import PlaneReference, plane_reference, score_planes
-from depthnormals.evaluate._planes_kernels import chessboard_inside, label_8connected
+from depthnormals.evaluate._planes_kernels import (
+    chessboard_inside,
+    chessboard_to,
+    label_8connected,
+    plane_inliers,
+    plane_ratio,
+)
 from depthnormals.metrics import angular_error
 
 # Kinect v1 disparity: f * baseline ~ 580 px * 0.075 m, quantised to 1/8 px
@@ -263,6 +269,38 @@ def test_chessboard_kernel_matches_reference(seed):
     dist = np.empty(labels.shape, np.int32)
     chessboard_inside(labels, dist)
     assert np.array_equal(dist, _chessboard_reference(labels))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_chessboard_to_matches_reference(seed):
+    rng = np.random.default_rng(seed)
+    mask = rng.random((30, 41)) < 0.01
+    dist = np.empty(mask.shape, np.int32)
+    chessboard_to(mask, dist)
+    v, u = np.nonzero(mask)
+    gv, gu = np.mgrid[0:30, 0:41]
+    ref = np.maximum(np.abs(gv[..., None] - v), np.abs(gu[..., None] - u)).min(axis=-1)
+    assert np.array_equal(dist, ref)
+    for r in (0, 3):  # the dilation of _planes
+        assert np.array_equal(dist <= r, ref <= r)
+
+
+def test_plane_kernels_match_numpy():
+    rng = np.random.default_rng(0)
+    pts = rng.normal(0.0, 1.0, (20, 30, 3))
+    pts[3, 4] = np.nan
+    thr = rng.uniform(0.1, 1.0, (20, 30))
+    allowed = rng.random((20, 30)) < 0.7
+    plane = np.array([0.6, 0.0, -0.8, 0.3])
+    ratio = np.empty((20, 30))
+    plane_ratio(pts, thr, plane, ratio)
+    with np.errstate(invalid="ignore"):
+        ref = np.abs(pts @ plane[:3] + plane[3]) / thr
+    assert np.allclose(ratio[np.isfinite(ref)], ref[np.isfinite(ref)], rtol=1e-12)
+    assert ratio[3, 4] == np.inf
+    mask = np.empty((20, 30), bool)
+    plane_inliers(pts, thr, allowed, plane, mask)
+    assert np.array_equal(mask, allowed & (np.nan_to_num(ref, nan=np.inf) <= 1.0))
 
 
 # --- the real sensor frames ---------------------------------------------------------------

@@ -21,7 +21,13 @@ import numpy as np
 from .._validate import check_int, check_positive, check_real
 from ..camera import backproject
 from ..metrics import angular_error
-from ._planes_kernels import chessboard_inside, label_8connected
+from ._planes_kernels import (
+    chessboard_inside,
+    chessboard_to,
+    label_8connected,
+    plane_inliers,
+    plane_ratio,
+)
 
 __all__ = ["PlaneInfo", "PlaneReference", "plane_reference", "score_planes", "sensor_threshold"]
 
@@ -74,6 +80,8 @@ LIDAR_THRESHOLD = (0.05, 0.0)
 #: residual RMS).
 MAX_BEND_RATIO = 0.25
 MAX_BEND_SHARE = 0.7
+#: The trend is fitted to at most this many points of a region.
+BEND_POINTS = 20000
 
 
 @dataclass(frozen=True)
@@ -208,16 +216,23 @@ def _largest_component(mask: np.ndarray) -> np.ndarray:
 
 
 def _dilate(mask: np.ndarray, r: int) -> np.ndarray:
-    """Chessboard dilation by ``r`` px (separable: rows, then columns)."""
-    h, w = mask.shape
-    rows = np.zeros((h, w + 2 * r), bool)
-    for s in range(2 * r + 1):
-        rows[:, s:s + w] |= mask
-    rows = rows[:, r:r + w]
-    out = np.zeros((h + 2 * r, w), bool)
-    for s in range(2 * r + 1):
-        out[s:s + h] |= rows
-    return out[r:r + h]
+    """Chessboard dilation by ``r`` px."""
+    dist = np.empty(mask.shape, np.int32)
+    chessboard_to(mask, dist)
+    return dist <= r
+
+
+def _inliers(pts: np.ndarray, thr: np.ndarray, allowed: np.ndarray, plane: np.ndarray
+             ) -> np.ndarray:
+    out = np.empty(allowed.shape, bool)
+    plane_inliers(pts, thr, allowed, np.ascontiguousarray(plane, np.float64), out)
+    return out
+
+
+def _ratio(pts: np.ndarray, thr: np.ndarray, plane: np.ndarray) -> np.ndarray:
+    out = np.empty(thr.shape)
+    plane_ratio(pts, thr, np.ascontiguousarray(plane, np.float64), out)
+    return out
 
 
 def _hypotheses(pts: np.ndarray, remaining: np.ndarray, rng: np.random.Generator,
@@ -260,9 +275,7 @@ def _best_hypothesis(pts: np.ndarray, thr: np.ndarray, remaining: np.ndarray, hy
     top = np.argsort(-counts, kind="stable")[:TOP_HYPOTHESES]
     sizes = []
     for k in top:
-        with np.errstate(invalid="ignore"):
-            inl = remaining & (np.abs(pts @ hyps[k, :3] + hyps[k, 3]) <= thr)
-        sizes.append(int(_largest_component(inl).sum()))
+        sizes.append(int(_largest_component(_inliers(pts, thr, remaining, hyps[k])).sum()))
     return hyps[top[int(np.argmax(sizes))]]
 
 
@@ -285,16 +298,15 @@ class _Params:
 def _grow(pts: np.ndarray, thr: np.ndarray, allowed: np.ndarray, plane: np.ndarray,
           refits: int) -> tuple[np.ndarray, np.ndarray]:
     """Largest connected inlier region of ``plane`` among ``allowed``, refitted ``refits`` times."""
-    n, d = plane[:3], plane[3]
+    plane = np.asarray(plane, np.float64)
     region = np.zeros(allowed.shape, bool)
     for _ in range(refits):
-        with np.errstate(invalid="ignore"):
-            inl = allowed & (np.abs(pts @ n + d) <= thr)
-        region = _largest_component(inl)
+        region = _largest_component(_inliers(pts, thr, allowed, plane))
         if region.sum() < 3:
             break
         n, d = _fit_plane(pts[region])
-    return region, np.append(n, d)
+        plane = np.append(n, d)
+    return region, plane
 
 
 def _extract(pts: np.ndarray, thr: np.ndarray, valid: np.ndarray, p: _Params,
@@ -350,12 +362,15 @@ def _bend_ratio(pts: np.ndarray, thr: np.ndarray, region: np.ndarray, plane: np.
 
     The residuals are fitted by ``a + b x + c y + d x^2 + e x y + f y^2`` (``x, y``: in-plane
     coordinates of the points, normalised to unit RMS); the RMS of the fit minus its mean.
+    Over at most BEND_POINTS points (every k-th in raster order): a trend needs no more.
     """
     q = pts[region]
     if q.shape[0] < 12:
         return float("inf")
+    step = -(-q.shape[0] // BEND_POINTS)
+    q = q[::step]
     n = plane[:3]
-    r = (q @ n + plane[3]) / thr[region]
+    r = (q @ n + plane[3]) / thr[region][::step]
     e1 = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(n, e1)
@@ -364,7 +379,7 @@ def _bend_ratio(pts: np.ndarray, thr: np.ndarray, region: np.ndarray, plane: np.
     x = x / (np.sqrt(np.mean(x * x)) or 1.0)
     y = y / (np.sqrt(np.mean(y * y)) or 1.0)
     A = np.stack([np.ones_like(x), x, y, x * x, x * y, y * y], axis=1)
-    coef, *_ = np.linalg.lstsq(A, r, rcond=None)
+    coef = np.linalg.lstsq(A.T @ A, A.T @ r, rcond=None)[0]  # normal equations: 6 x 6
     fit = A @ coef
     fit -= fit.mean()
     return float(np.sqrt(np.mean(fit * fit)))
@@ -394,8 +409,7 @@ def _reassign(pts: np.ndarray, thr: np.ndarray, valid: np.ndarray,
         labels = np.full((h, w), -1, np.int32)
         second_label = np.full((h, w), -1, np.int32)
         for k, (region, plane) in enumerate(zip(regions, planes, strict=True)):
-            with np.errstate(invalid="ignore"):
-                ratio = np.abs(pts @ plane[:3] + plane[3]) / thr
+            ratio = _ratio(pts, thr, plane)
             cand = valid & _dilate(region, p.radius) & (ratio <= 1.0)
             better = cand & (ratio < best)
             demoted = better & (labels >= 0)

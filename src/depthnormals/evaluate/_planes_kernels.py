@@ -1,9 +1,10 @@
 """Compiled image-region helpers of the plane reference (:mod:`._planes`).
 
-Two kernels, both serial and ``nogil``: 8-connected component labelling of a mask (one
-breadth-first flood fill per component over an explicit queue) and the chessboard distance
-to the nearest pixel outside a label region (two raster passes). Each has a short NumPy
-reference in ``tests/test_plane_reference.py`` that it is checked against.
+Serial ``nogil`` kernels: 8-connected component labelling of a mask (one breadth-first flood
+fill per component over an explicit queue), the chessboard distance to the outside of a label
+region and to a mask (two raster passes each), and the point-to-plane ratio / inlier mask of
+a plane over the back-projected image (one pass, instead of NumPy's temporaries). Each has a
+short NumPy reference in ``tests/test_plane_reference.py`` that it is checked against.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-__all__ = ["chessboard_inside", "label_8connected"]
+__all__ = ["chessboard_inside", "chessboard_to", "label_8connected", "plane_inliers", "plane_ratio"]
 
 
 @nb.njit(cache=True, nogil=True)
@@ -112,3 +113,77 @@ def chessboard_inside(labels: np.ndarray, out_dist: np.ndarray) -> None:
                 if cand < d:
                     d = cand
             out_dist[v, u] = d
+
+
+@nb.njit(cache=True, nogil=True)
+def plane_ratio(pts: np.ndarray, thr: np.ndarray, plane: np.ndarray, out_ratio: np.ndarray) -> None:
+    """``|n . X + d| / threshold`` per pixel.
+
+    Reads ``pts`` (H, W, 3) float64 (NaN = no point), ``thr`` (H, W) float64, ``plane``
+    ``(nx, ny, nz, d)``; writes ``out_ratio`` (H, W) float64 (``inf`` where there is no point).
+    """
+    h, w = thr.shape
+    nx, ny, nz, d = plane[0], plane[1], plane[2], plane[3]
+    for v in range(h):
+        for u in range(w):
+            r = abs(pts[v, u, 0] * nx + pts[v, u, 1] * ny + pts[v, u, 2] * nz + d) / thr[v, u]
+            out_ratio[v, u] = r if r == r else np.inf
+
+
+@nb.njit(cache=True, nogil=True)
+def plane_inliers(pts: np.ndarray, thr: np.ndarray, allowed: np.ndarray, plane: np.ndarray,
+                  out_mask: np.ndarray) -> None:
+    """``allowed & (|n . X + d| <= threshold)`` per pixel (see :func:`plane_ratio`).
+
+    Writes ``out_mask`` (H, W) bool.
+    """
+    h, w = thr.shape
+    nx, ny, nz, d = plane[0], plane[1], plane[2], plane[3]
+    for v in range(h):
+        for u in range(w):
+            if allowed[v, u]:
+                r = abs(pts[v, u, 0] * nx + pts[v, u, 1] * ny + pts[v, u, 2] * nz + d)
+                out_mask[v, u] = r <= thr[v, u]
+            else:
+                out_mask[v, u] = False
+
+
+@nb.njit(cache=True, nogil=True)
+def chessboard_to(mask: np.ndarray, out_dist: np.ndarray) -> None:
+    """Chessboard distance from each pixel to the nearest pixel of ``mask`` (0 on it).
+
+    Reads ``mask`` (H, W) bool; writes ``out_dist`` (H, W) int32 (``H + W`` when the mask is
+    empty). Two chamfer passes with unit weights (exact for the chessboard metric); ``dist
+    <= r`` is the chessboard dilation of the mask by ``r``.
+    """
+    h, w = mask.shape
+    big = h + w
+    for v in range(h):
+        for u in range(w):
+            if mask[v, u]:
+                out_dist[v, u] = 0
+                continue
+            d = big
+            if v > 0:
+                d = min(d, out_dist[v - 1, u] + 1)
+                if u > 0:
+                    d = min(d, out_dist[v - 1, u - 1] + 1)
+                if u < w - 1:
+                    d = min(d, out_dist[v - 1, u + 1] + 1)
+            if u > 0:
+                d = min(d, out_dist[v, u - 1] + 1)
+            out_dist[v, u] = d
+    for v in range(h - 1, -1, -1):
+        for u in range(w - 1, -1, -1):
+            d = out_dist[v, u]
+            if d == 0:
+                continue
+            if v < h - 1:
+                d = min(d, out_dist[v + 1, u] + 1)
+                if u > 0:
+                    d = min(d, out_dist[v + 1, u - 1] + 1)
+                if u < w - 1:
+                    d = min(d, out_dist[v + 1, u + 1] + 1)
+            if u < w - 1:
+                d = min(d, out_dist[v, u + 1] + 1)
+            out_dist[v, u] = min(d, big)
