@@ -4,12 +4,18 @@ Thread CPU time (``time.thread_time``) is reported beside wall time because the 
 project runs on is shared and its wall-clock medians move by up to 2x between runs.
 
     python benchmarks/targets.py [--repeats 40] [--scene demo-room]
+    python benchmarks/targets.py --real [--repeats 15] [--root ../shared/data/real-sensors]
+
+``--real``: the default ``3f2n+`` beside OpenCV FALS (windows 5 and 7, apply only) on every
+frame of the real sensor set (target: at most 3.0x FALS on every frame) and on the clean
+analytic renders (target: at most 2.0x), one thread, interleaved.
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -37,15 +43,55 @@ def _measure_all(fns, repeats):
             for c, t in zip(cpu, wall, strict=True)]
 
 
+def _fals(depth, K, window):
+    """OpenCV FALS on ``depth``: a callable that runs ``apply`` only (points precomputed)."""
+    import cv2
+
+    h, w = depth.shape
+    Km = dn.as_intrinsics(K).matrix
+    est = cv2.rgbd.RgbdNormals_create(h, w, cv2.CV_32F, Km, window,
+                                      cv2.rgbd.RgbdNormals_RGBD_NORMALS_METHOD_FALS)
+    points = cv2.rgbd.depthTo3d(np.nan_to_num(np.asarray(depth, np.float32)), Km)
+    return lambda: est.apply(points)
+
+
+def real_frames(root: Path, repeats: int) -> None:
+    """The default beside OpenCV FALS 5 and 7 on every real frame and on the clean renders."""
+    print(f"machine: {machine()}; 1 thread, median of {repeats} CPU ms, cases interleaved")
+    print(f"{'frame':<44}{'3f2n+':>8}{'FALS 5':>8}{'FALS 7':>8}{'x FALS5':>9}{'x FALS7':>9}")
+    rows = []
+    for folder in sorted(p for p in root.iterdir() if p.is_dir()):
+        for f in dn.datasets.open(folder):
+            rows.append((f"{folder.name}/{f.name}", f.depth, f.K, 3.0))
+    for scene in ("tilted-plane", "box-on-floor", "stairs", "sphere-before-wall", "demo-room"):
+        r = make_scene(scene).render()
+        rows.append((f"clean render {scene}", r.depth.astype(np.float32), r.K, 2.0))
+    worst = {3.0: 0.0, 2.0: 0.0}
+    for label, depth, K, target in rows:
+        res = _measure_all([lambda d=depth, k=K: dn.estimate_normals(d, k), _fals(depth, K, 5),
+                            _fals(depth, K, 7)], repeats)
+        ours, f5, f7 = (r[0] for r in res)
+        worst[target] = max(worst[target], ours / f7)
+        print(f"{label[:43]:<44}{ours:8.2f}{f5:8.2f}{f7:8.2f}{ours / f5:9.2f}{ours / f7:9.2f}")
+    print(f"worst x FALS 7: real frames {worst[3.0]:.2f} (target 3.0), clean renders "
+          f"{worst[2.0]:.2f} (target 2.0)")
+
+
 def main() -> None:
     import cv2
 
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--repeats", type=int, default=40)
     parser.add_argument("--scene", default="demo-room")
+    parser.add_argument("--real", action="store_true", help="real sensor frames and clean renders")
+    parser.add_argument("--root", type=Path,
+                        default=Path(__file__).resolve().parents[2] / "shared" / "data" / "real-sensors")
     args = parser.parse_args()
     dn.set_num_threads(1)
     cv2.setNumThreads(1)
+    if args.real:
+        real_frames(args.root, args.repeats)
+        return
     r = make_scene(args.scene).render()
     depth = r.depth.astype(np.float32)
     K = r.K.matrix
