@@ -317,7 +317,7 @@ def test_real_frames_have_planes(shared_data):
         ref = plane_reference(f.depth, f.K, threshold=sensor_threshold(f.meta), consensus=1)
         assert ref.n_planes >= 2, (f.group, f.name)
         assert ref.interior.sum() > 0.05 * f.depth.size, (f.group, f.name)
-        assert all(p.rms_ratio <= 0.45 for p in ref.planes)
+        assert all(p.rms_ratio <= 0.45 * 1.2 for p in ref.planes)  # MAX_RMS_RATIO, KEEP_SLACK
         n += 1
     assert n == 11
 

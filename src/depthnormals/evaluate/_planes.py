@@ -80,6 +80,10 @@ LIDAR_THRESHOLD = (0.05, 0.0)
 #: residual RMS).
 MAX_BEND_RATIO = 0.25
 MAX_BEND_SHARE = 0.7
+#: Hysteresis: a plane found under the limits above is kept after the reassignment while its
+#: RMS and trend stay within this multiple of them (a Kinect floor sits at the limits, 0.45 /
+#: 0.25, and would otherwise come and go with the seed).
+KEEP_SLACK = 1.2
 #: The trend is fitted to at most this many points of a region.
 BEND_POINTS = 20000
 
@@ -348,13 +352,14 @@ def _rms_ratio(pts: np.ndarray, thr: np.ndarray, region: np.ndarray, plane: np.n
 
 
 def _flat(pts: np.ndarray, thr: np.ndarray, region: np.ndarray, plane: np.ndarray,
-          p: _Params) -> bool:
-    """The residual tests: RMS within the band, no quadratic trend (curved surface)."""
+          p: _Params, slack: float = 1.0) -> bool:
+    """The residual tests: RMS within the band, no quadratic trend (curved surface); the two
+    limits times ``slack`` (:data:`KEEP_SLACK` once a plane was found)."""
     rms = _rms_ratio(pts, thr, region, plane)
-    if rms > p.max_rms_ratio:
+    if rms > slack * p.max_rms_ratio:
         return False
     bend = _bend_ratio(pts, thr, region, plane)
-    return bend <= p.max_bend_ratio and (rms <= 0.05 or bend <= MAX_BEND_SHARE * rms)
+    return bend <= slack * p.max_bend_ratio and (rms <= 0.05 or bend <= MAX_BEND_SHARE * rms)
 
 
 def _bend_ratio(pts: np.ndarray, thr: np.ndarray, region: np.ndarray, plane: np.ndarray) -> float:
@@ -518,13 +523,15 @@ def plane_reference(depth: Any, K: Any, *, depth_scale: float | None = None, see
         Pixels at chessboard distance >= this from the region's outside are its interior,
         closer ones its rim.
     consensus : int, default 3
-        Run the search with seeds ``seed .. seed + consensus - 1`` and keep the pixels on
-        which every run has a plane within :data:`CONSENSUS_DEG` of the first run's (each
-        plane's largest connected part, at least ``min_fraction`` of the image); the planes
-        are the first run's. On the real frames of ``../shared/data/real-sensors``, three runs
-        halve how much a score moves with the seed (FALS, window 11, interior mean: 0.5 deg
-        on average and 1.4 deg at most between seeds, against 1.0 and 3.3 deg for one run),
-        at three times the cost; ``consensus=1`` is the single run.
+        Run the search with seeds ``seed .. seed + consensus - 1`` and keep the pixels of the
+        first run where at least ``consensus // 2`` of the other runs have a plane within
+        :data:`CONSENSUS_DEG` of the first run's (with three: the first run and one more
+        agree); each plane keeps its largest connected part, at least ``min_fraction`` of
+        the image; the planes are the first run's. On the real frames of
+        ``../shared/data/real-sensors`` this halves how much a score moves with the seed
+        (FALS, window 11, interior mean: 0.5 deg on average and 1.3 deg at most between
+        seeds, against 1.0 and 3.3 deg for one run), at three times the cost;
+        ``consensus=1`` is the single run.
 
     Returns
     -------
@@ -547,10 +554,12 @@ def plane_reference(depth: Any, K: Any, *, depth_scale: float | None = None, see
     consensus = check_int(consensus, "consensus", minimum=1, maximum=100)
     thr = _threshold(np.where(valid, pts[..., 2], 0.0), p.floor_m, p.z2_per_m)
     labels, planes = _single_reference(pts, thr, valid, p, seed)
-    for extra in range(1, consensus):
-        other, other_planes = _single_reference(pts, thr, valid, p, seed + extra)
-        labels = _agree(labels, planes, other, other_planes)
     if consensus > 1:
+        votes = np.zeros(labels.shape, np.int32)
+        for extra in range(1, consensus):
+            other, other_planes = _single_reference(pts, thr, valid, p, seed + extra)
+            votes += _agree(labels, planes, other, other_planes) >= 0
+        labels = np.where(votes >= consensus // 2, labels, -1).astype(np.int32)
         labels, planes = _keep_large(labels, planes, p.min_pixels)
     return _assemble(pts, thr, labels, planes, p, seed, consensus)
 
@@ -565,7 +574,7 @@ def _single_reference(pts: np.ndarray, thr: np.ndarray, valid: np.ndarray, p: _P
     planes, keep = [], []
     for k, plane in enumerate(fitted):
         region = labels == k
-        if region.sum() >= p.min_pixels and _flat(pts, thr, region, plane, p):
+        if region.sum() >= p.min_pixels and _flat(pts, thr, region, plane, p, KEEP_SLACK):
             planes.append((plane[:3], float(plane[3])))
             keep.append(k)
     # relabel the survivors 0..P-1 in order
