@@ -27,8 +27,11 @@ a table, distractor boxes, 64x64 px, the ``kinect_v1``, ``tof`` and ``realsense_
   sample std over ``--seeds`` seeds (initialisation and batch order), Welch's t-test against
   ``xyz``.
 
-Defaults: 1600 training and 400 test views, 15 epochs, 3 seeds, one torch thread; about 10
-minutes on the shared 2-core machine. Views are rendered once and cached in ``--cache``.
+Defaults: 1600 training and 400 test views, 15 epochs, 3 seeds, one torch thread; about 9
+minutes on the shared 2-core machine under load. Views are rendered once and cached in
+``--cache`` (shared with pose6d.py). ``--clean``: the same views with the renderer's exact
+depth (no sensor model), to tell the normals' value from the noise's cost
+(docs/benchmarks.md sections 14 and 15).
 """
 
 from __future__ import annotations

@@ -36,8 +36,10 @@ on LineMOD), mean ADD (mm), rotation error (deg) and translation error (mm); mea
 std over seeds, and Welch's t-test of each input against the depth input.
 
 Defaults: 1600 training and 400 test views, 20 epochs (image and points), 3 seeds, one
-torch thread; about 10 minutes on the shared 2-core machine. Views are rendered once and
-cached in ``--cache`` (atomic ``.npz``).
+torch thread; about 12 minutes on the shared 2-core machine under load. Views are rendered
+once and cached in ``--cache`` (atomic ``.npz``). ``--clean``: the same views with the
+renderer's exact depth (no sensor model), to tell the normals' value from the noise's cost
+(docs/benchmarks.md sections 14 and 15).
 """
 
 from __future__ import annotations
