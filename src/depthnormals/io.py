@@ -37,6 +37,7 @@ __all__ = [
     "read_depth",
     "read_intrinsics",
     "read_normals",
+    "read_pgm",
     "to_open3d",
     "write_bytes_atomic",
     "write_normals",
@@ -240,9 +241,35 @@ def _read_npy(path: Path) -> np.ndarray:
         raise ValueError(f"{path} is not a readable .npy file: {exc}") from exc
 
 
-def _read_pgm(path: Path) -> np.ndarray:
-    """A binary (P5) PGM: 8-bit, or 16-bit big-endian when maxval > 255 (NYU v2's raw depth)."""
+def read_pgm(path: str | Path, *, byteorder: str = ">") -> np.ndarray:
+    """Read a binary (P5) or ASCII (P2) PGM: uint8 (maxval < 256) or uint16 (H, W).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    byteorder : {">", "<"}, default ">"
+        Byte order of 16-bit binary samples (maxval > 255). The PGM specification says
+        big-endian (``">"``, as NYU v2's registered frames); the NYU v2 raw disparity frames
+        are little-endian (``"<"``) behind the same header.
+
+    Returns
+    -------
+    ndarray (H, W), uint8 or uint16
+
+    Raises
+    ------
+    ValueError
+        Naming the file: not a PGM, a truncated or malformed header, too few samples, a size
+        larger than any depth image.
+    """
+    if byteorder not in (">", "<"):
+        raise ValueError(f"byteorder must be '>' (big-endian, the PGM standard) or '<'; "
+                         f"got {byteorder!r}")
+    path = Path(path)
     data = path.read_bytes()
+    if data[:2] not in (b"P5", b"P2"):
+        raise ValueError(f"{path} is not a PGM (magic {data[:2]!r}; expected P5 or P2)")
     fields: list[bytes] = []
     pos = 0
     while len(fields) < 4:
@@ -259,8 +286,6 @@ def _read_pgm(path: Path) -> np.ndarray:
             raise ValueError(f"{path} is not a readable PGM: the header is truncated")
         fields.append(data[start:pos])
     pos += 1  # the single whitespace after maxval
-    if fields[0] != b"P5":
-        raise ValueError(f"{path} is not a binary PGM (magic {fields[0][:8]!r}; expected P5)")
     try:
         w, h, maxval = (int(x) for x in fields[1:])
     except ValueError as exc:
@@ -269,12 +294,22 @@ def _read_pgm(path: Path) -> np.ndarray:
         raise ValueError(f"{path} is not a readable PGM: size {w} x {h}, maxval {maxval}")
     if w * h > MAX_PIXELS:
         raise ValueError(f"{path}: a {w} x {h} PGM is larger than any depth image")
-    dtype = np.dtype(">u2") if maxval > 255 else np.dtype("u1")
+    out = np.uint16 if maxval > 255 else np.uint8
+    if fields[0] == b"P2":
+        values = np.array(data[pos:].split()[: w * h], dtype=np.int64)
+        if values.size != w * h:
+            raise ValueError(f"{path} is truncated: {values.size} samples for a {w} x {h} PGM")
+        return values.reshape(h, w).astype(out)
+    dtype = np.dtype(byteorder + "u2") if maxval > 255 else np.dtype("u1")
     need = w * h * dtype.itemsize
     if len(data) - pos < need:
         raise ValueError(f"{path} is truncated: {w} x {h} pixels need {need} bytes, it has {len(data) - pos}")
-    return np.frombuffer(data, dtype=dtype, count=w * h, offset=pos).reshape(h, w).astype(
-        np.uint16 if maxval > 255 else np.uint8)
+    return np.frombuffer(data, dtype=dtype, count=w * h, offset=pos).reshape(h, w).astype(out)
+
+
+def _read_pgm(path: Path) -> np.ndarray:
+    """A PGM as :func:`read_depth` reads it: the standard's big-endian 16-bit samples."""
+    return read_pgm(path)
 
 
 def not_depth_reason(path: str | Path) -> str | None:

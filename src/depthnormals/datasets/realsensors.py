@@ -28,6 +28,7 @@ import numpy as np
 
 from .._png import read_png
 from ..camera import Intrinsics
+from ..io import read_pgm
 from ._common import depth_mask, resolve_intrinsics
 from ._frame import Frame
 
@@ -110,63 +111,6 @@ def encoding_of(info: dict) -> str:
     if "rotation" in text or "rotated" in text or "circularly shifted" in text:
         return "sunrgbd_rotated"
     return "linear"
-
-
-def read_pgm(path: str | Path, *, byteorder: str = ">") -> np.ndarray:
-    """Read a binary (P5) or ASCII (P2) PGM as uint8 / uint16 (H, W).
-
-    Parameters
-    ----------
-    path : str or Path
-        The file.
-    byteorder : {">", "<"}, default ">"
-        Byte order of 16-bit samples (maxval > 255). The PGM specification says big-endian
-        (``">"``); the NYU Depth v2 raw frames are little-endian (``"<"``) behind the same
-        header.
-
-    Returns
-    -------
-    ndarray (H, W), uint8 (maxval < 256) or uint16
-    """
-    if byteorder not in (">", "<"):
-        raise ValueError(f"byteorder must be '>' (big-endian, the PGM standard) or '<'; "
-                         f"got {byteorder!r}")
-    p = Path(path)
-    data = p.read_bytes()
-    magic = data[:2]
-    if magic not in (b"P5", b"P2"):
-        raise ValueError(f"{p}: not a PGM (magic {magic!r}; expected P5 or P2)")
-    fields: list[int] = []
-    pos = 2
-    while len(fields) < 3:
-        while pos < len(data) and data[pos:pos + 1].isspace():
-            pos += 1
-        if data[pos:pos + 1] == b"#":
-            while pos < len(data) and data[pos:pos + 1] not in (b"\n", b"\r"):
-                pos += 1
-            continue
-        start = pos
-        while pos < len(data) and data[pos:pos + 1].isdigit():
-            pos += 1
-        if start == pos:
-            raise ValueError(f"{p}: malformed PGM header")
-        fields.append(int(data[start:pos]))
-    w, h, maxval = fields
-    if not 0 < maxval < 65536:
-        raise ValueError(f"{p}: PGM maxval {maxval} is outside 1..65535")
-    dtype = np.dtype(np.uint8) if maxval < 256 else np.dtype(np.uint16).newbyteorder(byteorder)
-    if magic == b"P2":
-        values = np.array(data[pos:].split()[: w * h], dtype=np.int64)
-        if values.size != w * h:
-            raise ValueError(f"{p}: {values.size} samples for a {w} x {h} PGM")
-        return values.reshape(h, w).astype(dtype.newbyteorder("="))
-    body = data[pos + 1:]  # one whitespace byte ends the header
-    need = w * h * dtype.itemsize
-    if len(body) < need:
-        raise ValueError(f"{p}: {len(body)} bytes of samples for a {w} x {h} PGM "
-                         f"({need} needed)")
-    arr = np.frombuffer(body[:need], dtype=dtype).reshape(h, w)
-    return arr.astype(dtype.newbyteorder("="))
 
 
 def decode_nyu_disparity(raw: np.ndarray) -> np.ndarray:
