@@ -24,6 +24,7 @@ from .ddm import (
     estimate_noise_map,
     noise_profile,
 )
+from .ddm.uncertainty import kappa_to_uncertainty, uncertainty_to_kappa
 from .estimators import (
     angle_weighted,
     area_weighted,
@@ -68,6 +69,7 @@ __all__ = [
     "get_estimator",
     "get_num_threads",
     "io",
+    "kappa_to_uncertainty",
     "line_mod",
     "methods",
     "noise_profile",
@@ -81,5 +83,6 @@ __all__ = [
     "sri",
     "three_filters_to_normal",
     "to_open3d",
+    "uncertainty_to_kappa",
     "vector_svd",
 ]

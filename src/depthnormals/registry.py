@@ -24,6 +24,7 @@ import numpy as np
 from . import ddm
 from ._validate import NoValidNormalWarning, check_depth, no_valid_normal_message
 from .ddm.threefn_plus import fused_plus as _fused_3f2n_plus
+from .ddm.uncertainty import normals_with_uncertainty
 from .estimators import (
     angle_weighted,
     area_weighted,
@@ -175,7 +176,8 @@ def _split_options(method: str, info: EstimatorInfo, options: dict[str, Any],
 
 def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
                      depth_scale: float | None = None, stack: bool | None = None,
-                     **options: Any) -> np.ndarray:
+                     return_uncertainty: bool = False,
+                     **options: Any) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """Surface normals from a depth image by any registered estimator.
 
     Parameters
@@ -197,6 +199,11 @@ def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
         image; ``(H, W, 3)`` and ``(H, W, 4)`` are refused as colour images (ValueError);
         any other ``(N, H, W)`` is a stack of N frames. True: a 3-D ``depth`` is always a
         stack (N frames of width 3 or 4, or 1, included). False: one image only.
+    return_uncertainty : bool, default False
+        Also return the expected angular error of every normal (degrees, float32 (H, W), NaN
+        exactly where the normal is NaN; :mod:`depthnormals.ddm.uncertainty`): for
+        ``"3f2n+"`` (default options, every branch), ``"fals"`` and PCL's four modes; any
+        other method raises ValueError. One image only (not a stack).
     **options
         Keyword options of the chosen estimator (and, for ``"<name>+"``, of
         :func:`depthnormals.ddm.discontinuity_discrimination`). Unknown names raise TypeError.
@@ -206,6 +213,8 @@ def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
     normals : ndarray, shape (H, W, 3) or (N, H, W, 3), float32
         Unit normals in the OpenCV camera frame facing the camera (``dot(n, X) < 0``),
         NaN where no estimate is possible.
+    uncertainty : ndarray, shape (H, W), float32
+        Only with ``return_uncertainty=True``: the expected angular error in degrees.
 
     Warns
     -----
@@ -227,6 +236,19 @@ def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
     ndim = np.ndim(depth)
     if stack and ndim != 3:
         raise ValueError(f"stack=True needs a 3-D depth (N, H, W); got shape {np.shape(depth)}")
+    if not isinstance(return_uncertainty, bool):
+        raise TypeError(f"return_uncertainty must be True or False; got {return_uncertainty!r}")
+    if return_uncertainty:
+        if ndim == 3 and _is_stack(np.shape(depth), stack):
+            raise ValueError("return_uncertainty=True takes one image (H, W); call it per frame "
+                             "of a stack")
+        get_estimator(method[:-1] if method.endswith("+") else method)  # unknown names first
+        out, unc = normals_with_uncertainty(compute_normals, depth, K, method=method,
+                                            depth_scale=depth_scale, options=options)
+        if not np.isfinite(out[..., 0]).any():
+            z = check_depth(depth, depth_scale=depth_scale)
+            warnings.warn(no_valid_normal_message(z), NoValidNormalWarning, stacklevel=2)
+        return out, unc
     if ndim == 3 and _is_stack(np.shape(depth), stack):
         from .batch import estimate_normals_batch
 

@@ -532,12 +532,15 @@ def box_fit_from_prepared(z: np.ndarray, fx: float, fy: float, cx: float, cy: fl
                           radius: int, shift: int, gate: float, self_weight: float,
                           big_radius: int = 0, big_gate: float | None = None,
                           sigma: float | None = None,
-                          sigma_tiles: tuple[np.ndarray, int] | None = None) -> np.ndarray:
+                          sigma_tiles: tuple[np.ndarray, int] | None = None,
+                          out_scores: list | None = None) -> np.ndarray:
     """:func:`box_fit_normals` on prepared depth. ``sigma_tiles`` ``(levels, tile)``: the noise
     of every ``tile x tile`` tile (footprints, NaN: ``sigma``;
     :func:`depthnormals.ddm.noise.noise_tiles`), with ``sigma`` given: ``gate``, ``big_gate``
     and the local choice's noise unit then scale per pixel with the tile's variance over
-    ``sigma^2``."""
+    ``sigma^2``. ``out_scores``: a list that receives the residual variances (H, W) of the
+    ``radius`` windows and of the ``big_radius`` ones (all inf without them), for the
+    uncertainty map (:mod:`depthnormals.ddm.uncertainty`); the normals do not change."""
     out = np.empty((z.shape[0], z.shape[1], 3), dtype=np.float32)
     if sigma is not None and sigma > 0.0:  # the local choice (needs the planes)
         _, score, plane = box_fit_windows(z, fx, fy, cx, cy, radius, planes=True, normals=False)
@@ -556,9 +559,13 @@ def box_fit_from_prepared(z: np.ndarray, fx: float, fy: float, cx: float, cy: fl
         run_rows(_choose_local_rows, z.shape[0], z, score, plane, big_n, big_s, int(shift),
                  (float(gate), float(bg), 1.0 / (sigma * sigma)), tiles, LOCAL_CAP,
                  (float(fx), float(fy), float(cx), float(cy)), out, min_rows=16)
+        if out_scores is not None:
+            out_scores.extend((score, big_s))
         return out
     fit_n, score = box_fit_windows(z, fx, fy, cx, cy, radius)
     big = box_fit_windows(z, fx, fy, cx, cy, big_radius) if big_radius > radius else None
+    if out_scores is not None:
+        out_scores.extend((score, big[1] if big is not None else np.full_like(score, np.inf)))
     choose_windows(z, fit_n, score, fx, fy, cx, cy, shift=shift, gate=gate,
                    self_weight=self_weight, out=out, big=big, big_gate=big_gate)
     return out

@@ -454,7 +454,8 @@ def _upsample_rows(v0, v1, z, half, cam, out):
 
 
 def support_select(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
-                   sigma: float, *, profile: SupportProfile | None = None) -> np.ndarray:
+                   sigma: float, *, profile: SupportProfile | None = None,
+                   out_scores: list | None = None) -> np.ndarray:
     """The noisy branch on prepared depth ``z`` (module doc): normals (H, W, 3) float32, NaN
     at invalid depth and where no window has a fit. ``sigma``: the noise level
     (footprints); ``profile``: the measured support when already known.
@@ -462,16 +463,24 @@ def support_select(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
     From radius :data:`HALF_RADIUS` on, the windows and the choice run on every second row
     and column (windows of radius ``r / 2`` there: the same extent) and every pixel takes the
     choice of its 2x2 cell: a window of 13 pixels or more loses little by it, and the branch
-    costs about a third."""
+    costs about a third. ``out_scores``: a list that receives the residual variances of the
+    chosen radius's windows (footprints^2 of the profile; on every second row and column from
+    :data:`HALF_RADIUS` on) and their shift, for the uncertainty map
+    (:mod:`depthnormals.ddm.uncertainty`); the normals do not change."""
     p = support_profile(z, fx, fy, cx, cy, sigma) if profile is None else profile
     h, w = z.shape
     out = np.empty((h, w, 3), dtype=np.float32)
     if p.radius < HALF_RADIUS:
-        run_rows(_choose_least_rows, h, z, *choice_inputs(z, fx, fy, cx, cy, p), out, min_rows=16)
+        args = choice_inputs(z, fx, fy, cx, cy, p)
+        run_rows(_choose_least_rows, h, z, *args, out, min_rows=16)
+        if out_scores is not None:
+            out_scores.extend((args[0][1], args[2]))
         return out
     zd = np.ascontiguousarray(z[::2, ::2])
     cam = (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy)
     args = choice_inputs(zd, *cam, p, radius=round(p.radius / 2), score_scale=4.0)
+    if out_scores is not None:
+        out_scores.extend((args[0][1], args[2]))
     # the choice reads depth only for the gates' growth and for validity: every cell chooses
     zfill = np.where(np.isnan(zd), zd.dtype.type(p.depth if p.depth == p.depth else 1.0), zd)
     half = np.empty((zd.shape[0], zd.shape[1], 3), dtype=np.float32)

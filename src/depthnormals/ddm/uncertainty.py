@@ -1,0 +1,335 @@
+"""The expected angular error of every normal (ours, not the paper's: the 3F2N+ paper gives none).
+
+A least-squares plane of inverse depth over a window of ``N`` pixels with independent noise of
+``sigma`` footprints (``z / f``) has slopes whose per-axis standard deviation, turned into the
+normal's angle, is ``sigma / sqrt(S_uu)`` radians (``S_uu = sum du^2 = N r (r + 1) / 3`` over a
+full ``(2 r + 1)^2`` window, fronto-parallel at the image centre;
+:func:`depthnormals.ddm.support.predicted_error`). Off the centre and on an oblique plane the
+slope error moves the normal by ``|n . ray|`` times that, in the directions ``(1, 0, -x)`` and
+``(0, 1, -y)`` (``ray = (x, y, 1)``) projected on the tangent plane. Two independent axes of
+standard deviations ``s_x``, ``s_y`` give an angular error whose mean is about
+``sqrt(pi / 2) sqrt((s_x^2 + s_y^2) / 2)`` (Rayleigh when equal).
+
+The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncertainty"):
+
+- **plane fits with a noise level** (the box-fit branch ``box_select``, FALS, PCL's modes): the
+  formula above with the noise of the pixel's 64x64 tile, the window the branch took (the large
+  centred window where it passed its gate, else the small one, the least residual of the nine
+  that hold the pixel standing for the chosen one), inflated by ``sqrt(residual / sigma^2)``
+  where the window's residual variance exceeds the noise (a chi-square test: a window across
+  two surfaces is biased as well as noisy);
+- **the measured support** (``support_select``): the measured mean error of the chosen radius
+  (:attr:`depthnormals.ddm.support.SupportProfile.error`), grown with depth as the measured
+  residual does (``(z / z_ref)^(gamma / 2)``) and scaled by ``sqrt(residual / expected)``, the
+  chosen window's residual over the median residual at its depth;
+- **clean depth** (the plane hypotheses): the float rounding of the one-pixel stencils
+  (``sigma / sqrt(6)``) plus, where the normals of the 3x3 disagree (an edge, a crease: where
+  the hypotheses' scores say no stencil fits), their mean angle to the pixel's normal.
+
+One vectorised pass per image (:func:`_fit_error_rows`, :func:`_spread_rows`) over quantities
+the branches already computed. Conversions to the von Mises-Fisher concentration of Bae et al.
+(ICCV 2021): :func:`uncertainty_to_kappa`, :func:`kappa_to_uncertainty`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numba as nb
+import numpy as np
+
+from .._parallel import run_rows
+from ..kernels.depth import prepare
+from .auto import (
+    BIG_RADIUS,
+    EXCESS,
+    GATE,
+    NOISE_CLEAN,
+    _branch,
+    box_radius,
+    plane_select,
+)
+from .boxfit import box_fit_from_prepared, box_fit_windows
+from .noise import TILE, noise_pass
+from .support import support_profile, support_select
+
+__all__ = ["UNCERTAINTY_METHODS", "kappa_to_uncertainty", "normals_with_uncertainty",
+           "uncertainty_to_kappa"]
+
+#: Mean of a Rayleigh distribution per unit of its per-axis standard deviation.
+RAYLEIGH_MEAN = math.sqrt(math.pi / 2.0)
+#: ``S_uu`` of the one-pixel stencils of the plane hypotheses (a 3x3: 3 columns of 1 + 1).
+CLEAN_SUU = 6.0
+
+#: Methods whose uncertainty has a closed form (with their window half-size from the options).
+UNCERTAINTY_METHODS = ("3f2n+", "fals", "pcl-average-3d-gradient", "pcl-average-depth-change",
+                       "pcl-covariance-matrix", "pcl-simple-3d-gradient")
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, out):
+    """Rows ``[v0, v1)`` of the plane-fit error map (module doc), degrees, into ``out`` (H, W).
+
+    Reads ``normals`` (H, W, 3) (NaN: ``out`` NaN), ``score`` (H', W') the residual variances
+    (footprints^2) of the fitted windows at ``shift`` (the least of the nine windows
+    ``shift (i, j)`` away that hold the pixel; ``shift`` 0: the centred one), a pixel reading
+    ``score[v // step, u // step]`` (``step`` = ``H' < H`` ? 2 : 1); ``tiles = (e0, var,
+    tile)``: per ``tile x tile`` tile the error (radians per axis) and the residual variance
+    that the noise alone gives; ``depth = (zref, gamma, floor, tilt)``: both grow as
+    ``(z / zref)^gamma`` (variance), the residual ratio is taken at least ``floor``, and with
+    ``tilt`` the error is projected as the module doc says; ``big = (score, gate, ratio)``:
+    where the large window's residual is within ``gate`` times ``var`` the error is
+    ``ratio e0`` and that residual counts; ``cam = (fx, fy, cx, cy)``."""
+    e0t, vart, tile = tiles
+    zref, gamma, floor, tilt = depth
+    big_s, big_gate, big_ratio = big
+    fx, fy, cx, cy = cam
+    h, w = z.shape
+    hs, ws = score.shape
+    step = 2 if hs < h else 1
+    use_big = big_s.shape[0] == h
+    izref = 1.0 / zref if zref > 0.0 else 0.0
+    nan = np.float32(np.nan)
+    for v in range(v0, v1):
+        vs = v // step
+        ry = (v - cy) / fy
+        for u in range(w):
+            nx = np.float64(normals[v, u, 0])
+            ny = np.float64(normals[v, u, 1])
+            nz = np.float64(normals[v, u, 2])
+            if not (nx + ny + nz - (nx + ny + nz) == 0.0):
+                out[v, u] = nan
+                continue
+            us = u // step
+            e0 = e0t[v // tile, u // tile]
+            var = vart[v // tile, u // tile]
+            if gamma > 0.0:
+                g = (np.float64(z[v, u]) * izref) ** gamma
+                var *= g
+                e0 *= math.sqrt(g)
+            res = np.inf
+            if use_big and np.float64(big_s[v, u]) <= big_gate * var:
+                res = np.float64(big_s[v, u])
+                e0 *= big_ratio
+            else:
+                for k in range(9):
+                    a = vs + shift * (k // 3 - 1)
+                    b = us + shift * (k % 3 - 1)
+                    if 0 <= a < hs and 0 <= b < ws:
+                        s = np.float64(score[a, b])
+                        res = s if s < res else res
+            ratio = res / var if var > 0.0 else 1.0
+            ratio = ratio if ratio > floor else floor
+            if not (ratio < np.inf):
+                ratio = 1e4
+            e = e0 * math.sqrt(ratio)
+            if tilt:
+                rx = (u - cx) / fx
+                g = abs(nx * rx + ny * ry + nz)
+                dx = nx - nz * rx  # |e - (e . n) n|^2 = |e|^2 - (e . n)^2, e = (1, 0, -rx)
+                sx = 1.0 + rx * rx - dx * dx
+                dy = ny - nz * ry
+                sy = 1.0 + ry * ry - dy * dy
+                px = 0.5 * (max(sx, 0.0) + max(sy, 0.0))
+                e *= g * math.sqrt(px)
+            out[v, u] = np.float32(math.degrees(RAYLEIGH_MEAN * e))
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _spread_rows(v0, v1, normals, base, out):
+    """Rows ``[v0, v1)`` of the clean-branch map: ``base`` (degrees) plus the mean angle
+    (degrees) between the pixel's normal and the finite normals of its 3x3; NaN where the
+    pixel's normal is NaN."""
+    h, w = normals.shape[:2]
+    nan = np.float32(np.nan)
+    for v in range(v0, v1):
+        for u in range(w):
+            x = np.float64(normals[v, u, 0])
+            y = np.float64(normals[v, u, 1])
+            t = np.float64(normals[v, u, 2])
+            if not (x + y + t - (x + y + t) == 0.0):
+                out[v, u] = nan
+                continue
+            acc = 0.0
+            m = 0
+            for a in range(max(v - 1, 0), min(v + 2, h)):
+                for b in range(max(u - 1, 0), min(u + 2, w)):
+                    d = (x * normals[a, b, 0] + y * normals[a, b, 1] + t * normals[a, b, 2])
+                    if d == d and not (a == v and b == u):
+                        acc += math.acos(min(1.0, max(-1.0, d)))
+                        m += 1
+            out[v, u] = np.float32(base + (math.degrees(acc / m) if m > 0 else 0.0))
+
+
+def _full_suu(r: int) -> float:
+    return (2 * r + 1) ** 2 * r * (r + 1) / 3.0
+
+
+def _tile_maps(z: np.ndarray, fx: float, fy: float, sigma: float, r: int,
+               levels: np.ndarray | None, floor: float) -> tuple:
+    """``(e0, var, tile)`` of the i.i.d. model: per tile its noise (at least ``floor``, NaN
+    tiles the image's ``sigma``) and the error of a full window of radius ``r``."""
+    if levels is None:
+        levels = noise_pass(z, fx, fy, tile=TILE).tiles()
+    t = np.where(np.isfinite(levels), levels, sigma)
+    t = np.maximum(t, floor)
+    e0 = np.ascontiguousarray(t / math.sqrt(_full_suu(r)))
+    return e0, np.ascontiguousarray(t * t), TILE
+
+
+def _fit_error(z, normals, score, shift, tiles, depth, big, cam) -> np.ndarray:
+    out = np.empty(z.shape, dtype=np.float32)
+    if big is None:
+        big = (np.full((1, 1), np.inf, dtype=np.float32), 0.0, 1.0)
+    run_rows(_fit_error_rows, z.shape[0], z, normals, score, int(shift), tiles, depth, big, cam,
+             out, min_rows=16)
+    return out
+
+
+def _box_branch(z, cam, sigma, levels):
+    """The i.i.d. box-fit branch with its map (module doc)."""
+    fx, fy, cx, cy = cam
+    r = box_radius(sigma)
+    scores: list = []
+    t = np.maximum(levels, NOISE_CLEAN)
+    big = max(BIG_RADIUS, r)
+    out = box_fit_from_prepared(z, fx, fy, cx, cy, radius=r, shift=r, gate=GATE * sigma * sigma,
+                                self_weight=1.0, big_radius=big, sigma=sigma,
+                                sigma_tiles=(t, TILE), out_scores=scores)
+    score, big_s = scores
+    tiles = _tile_maps(z, fx, fy, sigma, r, levels, NOISE_CLEAN)
+    bigs = (big_s, GATE, math.sqrt(_full_suu(r) / _full_suu(big))) if big > r else None
+    unc = _fit_error(z, out, score, r, tiles, (1.0, 0.0, 1.0, True), bigs, cam)
+    return out, unc
+
+
+def _support_branch(z, cam, sigma, prof):
+    """The measured-support branch with its map (module doc)."""
+    fx, fy, cx, cy = cam
+    scores: list = []
+    out = support_select(z, fx, fy, cx, cy, sigma, profile=prof, out_scores=scores)
+    score, shift = scores
+    i = prof.radii.index(prof.radius)
+    e = math.radians(prof.error[i]) / RAYLEIGH_MEAN if prof.error[i] == prof.error[i] else 0.0
+    tiles = (np.full((1, 1), e), np.full((1, 1), max(prof.residual[i], 1e-30)), max(z.shape) + 1)
+    zref = prof.depth if prof.depth == prof.depth else 1.0
+    unc = _fit_error(z, out, score, shift, tiles, (zref, prof.exponent, 0.25, False), None, cam)
+    return out, unc
+
+
+def _clean_branch(z, cam, sigma):
+    fx, fy, cx, cy = cam
+    out = plane_select(z, None, fx, fy, cx, cy)
+    s = sigma if sigma == sigma and sigma > 0.0 else 0.0
+    base = math.degrees(RAYLEIGH_MEAN * s / math.sqrt(CLEAN_SUU))
+    unc = np.empty(z.shape, dtype=np.float32)
+    run_rows(_spread_rows, z.shape[0], out, float(base), unc, min_rows=16)
+    return out, unc
+
+
+def _plain(z, cam, normals, r: int):
+    """A plain plane fit over a ``(2 r + 1)^2`` window (FALS, PCL's modes): the i.i.d. model
+    with the tile noise, the window's own residual."""
+    fx, fy, cx, cy = cam
+    p = noise_pass(z, fx, fy, tile=TILE)
+    sigma = p.sigma if p.sigma == p.sigma else 0.0
+    _, score = box_fit_windows(z, fx, fy, cx, cy, r, normals=False)
+    tiles = _tile_maps(z, fx, fy, sigma, r, p.tiles(), 1e-6)
+    return _fit_error(z, normals, score, 0, tiles, (1.0, 0.0, 1.0, True), None, cam)
+
+
+def normals_with_uncertainty(compute, depth: Any, K: Any, *, method: str,
+                             depth_scale: float | None, options: dict[str, Any]
+                             ) -> tuple[np.ndarray, np.ndarray]:
+    """``(normals, uncertainty)`` of ``method`` (one of :data:`UNCERTAINTY_METHODS`);
+    ``compute(depth, K, method=..., depth_scale=..., **options)`` computes the normals of the
+    plain methods (the registry's). ValueError for any other method or module option set."""
+    if method not in UNCERTAINTY_METHODS:
+        raise ValueError(f"return_uncertainty=True is supported for methods "
+                         f"{', '.join(UNCERTAINTY_METHODS)}; got method {method!r}")
+    if method == "3f2n+":
+        return _plus(depth, K, depth_scale, options)
+    normals = compute(depth, K, method=method, depth_scale=depth_scale, **options)
+    z, cam = prepare(depth, K, depth_scale)
+    c = (float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy))
+    if method == "fals":
+        r = int(options.get("window", 5)) // 2
+    else:
+        r = max(1, int(float(options.get("normal_smoothing_size", 10.0))) // 2)
+    return normals, _plain(z, c, normals, r)
+
+
+def _plus(depth, K, depth_scale, options):
+    from ._module import ModuleOptions
+
+    bad = sorted(set(options) - {"selection"})
+    if bad:
+        raise ValueError(f"return_uncertainty=True covers 3f2n+ with its default options "
+                         f"(selection 'auto', 'box-fit' or 'planes'); got options {bad}")
+    o = ModuleOptions(**options).normalised()
+    if o["selection"] not in ("auto", "box-fit", "planes"):
+        raise ValueError(f"return_uncertainty=True covers 3f2n+ with selection 'auto', "
+                         f"'box-fit' or 'planes'; got {o['selection']!r}")
+    z, cam = prepare(depth, K, depth_scale)
+    c = (float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy))
+    branch, p = _branch(z, c[0], c[1], o)
+    if branch == "planes":
+        sigma = p.sigma if p is not None else float("nan")
+        return _clean_branch(z, c, sigma)
+    sigma = p.sigma
+    prof = support_profile(z, *c, sigma)
+    if not p.quant > p.iid and prof.excess() <= EXCESS:
+        return _box_branch(z, c, sigma, p.tiles())
+    return _support_branch(z, c, sigma, prof)
+
+
+def uncertainty_to_kappa(err_deg: Any) -> np.ndarray:
+    """The von Mises-Fisher concentration ``kappa`` whose mean angular error is ``err_deg``.
+
+    Bae, Budvytis and Cipolla, "Estimating and Exploiting the Aleatoric Uncertainty in Surface
+    Normal Estimation", ICCV 2021, model each normal by an angular vMF (AngMF) of concentration
+    ``kappa``, density ``kappa / (2 pi sinh kappa) exp(kappa mu . n)`` on the unit sphere. For
+    large ``kappa`` the angle ``theta`` to the mean is Rayleigh with ``sigma^2 = 1 / kappa``
+    (``p(theta) ~ kappa theta exp(-kappa theta^2 / 2)``), whose mean is ``sqrt(pi / (2
+    kappa))``. So ``kappa = pi / (2 e^2)``, ``e`` the mean angular error in radians. The
+    relation is within 2 % of the exact vMF mean for errors below 20 degrees (tested by
+    sampling a vMF in tests/test_uncertainty.py).
+
+    Parameters
+    ----------
+    err_deg : array_like
+        Expected angular error in degrees (> 0; 0 gives inf, NaN stays NaN).
+
+    Returns
+    -------
+    kappa : ndarray, float64 (a 0-d array for a scalar)
+
+    Examples
+    --------
+    >>> import depthnormals as dn
+    >>> round(float(dn.uncertainty_to_kappa(1.0)), 1)
+    5157.0
+    """
+    e = np.radians(np.asarray(err_deg, dtype=np.float64))
+    if np.any(e < 0):
+        raise ValueError("err_deg must be >= 0 degrees")
+    with np.errstate(divide="ignore"):
+        return math.pi / (2.0 * e * e)
+
+
+def kappa_to_uncertainty(kappa: Any) -> np.ndarray:
+    """The mean angular error (degrees) of a von Mises-Fisher of concentration ``kappa``:
+    ``sqrt(pi / (2 kappa))`` radians, the inverse of :func:`uncertainty_to_kappa` (same
+    source and large-``kappa`` Rayleigh relation).
+
+    Examples
+    --------
+    >>> import depthnormals as dn
+    >>> round(float(dn.kappa_to_uncertainty(dn.uncertainty_to_kappa(3.0))), 6)
+    3.0
+    """
+    k = np.asarray(kappa, dtype=np.float64)
+    if np.any(k <= 0):
+        raise ValueError("kappa must be > 0")
+    return np.degrees(np.sqrt(math.pi / (2.0 * k)))
