@@ -26,7 +26,8 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     # front ends and the public API
     ("depthnormals", "depthnormals.__main__", "depthnormals.cli", "depthnormals.commands",
      "depthnormals.datasets", "depthnormals.evaluate", "depthnormals.synth",
-     "depthnormals.torch", "depthnormals.viz", "depthnormals.jobs", "depthnormals.cluster"),
+     "depthnormals.torch", "depthnormals.viz", "depthnormals.jobs", "depthnormals.cluster",
+     "depthnormals.compat"),
 )
 #: Layers below this one may not import by name at run time (``importlib``).
 FIRST_FRONT_END = len(LAYERS) - 1
