@@ -186,9 +186,9 @@ def gsplat_depth_to_normal(depths: torch.Tensor, camtoworlds: torch.Tensor, Ks: 
     principal point at (W/2, H/2) and integer pixel centres; near and far planes did not
     change the normals. 2DGS's ``utils.point_utils.depth_to_normal(view, depth)`` ((1, H, W)
     depth, (H, W, 3) world normals, same sign and zero border) is this function with
-    ``depths = depth[..., None]``, ``camtoworlds = inverse(view.world_view_transform.T)``,
-    ``Ks`` with ``cx = W / 2 + 0.5``, ``cy = H / 2 + 0.5`` (its integer-centred principal
-    point at W/2, H/2 in gsplat's half-integer reading), then ``[0]``.
+    ``depths = depth[..., None]``, ``camtoworlds = inverse(view.world_view_transform.T)[None]``
+    and ``Ks[None]`` with ``cx = W / 2 + 0.5``, ``cy = H / 2 + 0.5`` (2DGS's principal point
+    W/2, H/2 with integer centres, in gsplat's half-integer reading), then ``[0]``.
 
     Parameters
     ----------
