@@ -24,7 +24,8 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
   chosen window's residual over the median residual at its depth;
 - **clean depth** (the plane hypotheses): the float rounding of the one-pixel stencils
   (``sigma / sqrt(6)``) plus, where the normals of the 3x3 disagree (an edge, a crease: where
-  the hypotheses' scores say no stencil fits), their mean angle to the pixel's normal.
+  the hypotheses' scores say no stencil fits), the mean angle of its four neighbours' normals to
+  the pixel's normal.
 
 One vectorised pass per image (:func:`_fit_error_rows`, :func:`_spread_rows`) over quantities
 the branches already computed. Conversions to the von Mises-Fisher concentration of Bae et al.
@@ -61,10 +62,21 @@ __all__ = ["UNCERTAINTY_METHODS", "kappa_to_uncertainty", "normals_with_uncertai
 RAYLEIGH_MEAN = math.sqrt(math.pi / 2.0)
 #: ``S_uu`` of the one-pixel stencils of the plane hypotheses (a 3x3: 3 columns of 1 + 1).
 CLEAN_SUU = 6.0
+#: The neighbours (dv, du) whose normals the clean branch's map compares with the pixel's.
+CROSS = np.array([[-1, 0], [0, -1], [0, 1], [1, 0]], dtype=np.int64)
 
 #: Methods whose uncertainty has a closed form (with their window half-size from the options).
 UNCERTAINTY_METHODS = ("3f2n+", "fals", "pcl-average-3d-gradient", "pcl-average-depth-change",
                        "pcl-covariance-matrix", "pcl-simple-3d-gradient")
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _min_into(a, out_best):
+    """``out_best = min(out_best, a)`` elementwise (slices from 0, so it vectorises)."""
+    for i in range(a.size):
+        x = a[i]
+        b = out_best[i]
+        out_best[i] = x if x < b else b
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -72,17 +84,18 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
     """Rows ``[v0, v1)`` of the plane-fit error map (module doc), degrees, into ``out`` (H, W).
 
     Reads ``normals`` (H, W, 3) (NaN: ``out`` NaN), ``score`` (H', W') the residual variances
-    (footprints^2) of the fitted windows at ``shift`` (the least of the nine windows
-    ``shift (i, j)`` away that hold the pixel; ``shift`` 0: the centred one), a pixel reading
-    ``score[v // step, u // step]`` (``step`` = ``H' < H`` ? 2 : 1); ``tiles = (e0, var,
-    tile)``: per ``tile x tile`` tile the error (radians per axis) and the residual variance
-    that the noise alone gives; ``depth = (zref, gamma, floor, tilt)``: both grow as
-    ``(z / zref)^gamma`` (variance), the residual ratio is taken at least ``floor``, and with
-    ``tilt`` the error is projected as the module doc says; ``big = (score, gate, ratio)``:
-    where the large window's residual is within ``gate`` times ``var`` the error is
-    ``ratio e0`` and that residual counts; ``cam = (fx, fy, cx, cy)``."""
+    (footprints^2) of the fitted windows, of which the least of the nine ``shift (i, j)`` away
+    that hold the pixel counts (``shift`` 0: the centred one), a pixel reading ``score[v //
+    step, u // step]`` (``step`` 2 where ``H' < H``, else 1); ``tiles = (e0, var, tile)``: per
+    ``tile x tile`` tile the error (radians per axis) and the residual variance that the noise
+    alone gives; ``depth = (zref, half, floor, tilt)``: the variance grows as ``(z /
+    zref)^(half / 2)`` (``half`` an integer 0..4) and the error as its square root, the
+    residual ratio is taken at least ``floor``, and with ``tilt`` the error is projected as the
+    module doc says; ``big = (score, gate, ratio)``: where the large window's residual (H, W) is
+    within ``gate`` times ``var`` the error is ``ratio e0`` and that residual counts (a (1, 1)
+    score: none); ``cam = (fx, fy, cx, cy)``. Every loop runs along a row."""
     e0t, vart, tile = tiles
-    zref, gamma, floor, tilt = depth
+    zref, half, floor, tilt = depth
     big_s, big_gate, big_ratio = big
     fx, fy, cx, cy = cam
     h, w = z.shape
@@ -91,75 +104,130 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
     use_big = big_s.shape[0] == h
     izref = 1.0 / zref if zref > 0.0 else 0.0
     nan = np.float32(np.nan)
+    res_s = np.empty(ws, dtype=np.float32)
+    f32 = np.float32
+    res = np.empty(w, dtype=f32)
+    e0r = np.empty(w, dtype=f32)
+    varr = np.empty(w, dtype=f32)
+    x = np.empty(w, dtype=f32)
+    y = np.empty(w, dtype=f32)
+    t = np.empty(w, dtype=f32)
+    rx = ((np.arange(w) - cx) / fx).astype(f32)
+    deg = f32(math.degrees(RAYLEIGH_MEAN))
+    fl = f32(floor)
+    one = f32(1.0)
+    cap = f32(1e4)
     for v in range(v0, v1):
         vs = v // step
-        ry = (v - cy) / fy
-        for u in range(w):
-            nx = np.float64(normals[v, u, 0])
-            ny = np.float64(normals[v, u, 1])
-            nz = np.float64(normals[v, u, 2])
-            if not (nx + ny + nz - (nx + ny + nz) == 0.0):
-                out[v, u] = nan
+        res_s[:] = np.inf
+        for dv in range(-1, 2):
+            a = vs + shift * dv
+            if a < 0 or a >= hs:
                 continue
-            us = u // step
-            e0 = e0t[v // tile, u // tile]
-            var = vart[v // tile, u // tile]
-            if gamma > 0.0:
-                g = (np.float64(z[v, u]) * izref) ** gamma
-                var *= g
-                e0 *= math.sqrt(g)
-            res = np.inf
-            if use_big and np.float64(big_s[v, u]) <= big_gate * var:
-                res = np.float64(big_s[v, u])
-                e0 *= big_ratio
-            else:
-                for k in range(9):
-                    a = vs + shift * (k // 3 - 1)
-                    b = us + shift * (k % 3 - 1)
-                    if 0 <= a < hs and 0 <= b < ws:
-                        s = np.float64(score[a, b])
-                        res = s if s < res else res
-            ratio = res / var if var > 0.0 else 1.0
-            ratio = ratio if ratio > floor else floor
-            if not (ratio < np.inf):
-                ratio = 1e4
-            e = e0 * math.sqrt(ratio)
-            if tilt:
-                rx = (u - cx) / fx
-                g = abs(nx * rx + ny * ry + nz)
-                dx = nx - nz * rx  # |e - (e . n) n|^2 = |e|^2 - (e . n)^2, e = (1, 0, -rx)
-                sx = 1.0 + rx * rx - dx * dx
+            for du in range(-1, 2):
+                d = shift * du
+                lo = max(0, -d)
+                hi = min(ws, ws - d)
+                _min_into(score[a, lo + d:hi + d], res_s[lo:hi])
+        et = e0t[v // tile]
+        vt = vart[v // tile]
+        if step == 1:
+            res[:] = res_s[:w]
+        else:
+            for u in range(w):
+                res[u] = res_s[u >> 1]
+        for j in range(et.size):  # constant along a tile: slice fills
+            a = j * tile
+            b = min(a + tile, w)
+            e0r[a:b] = et[j]
+            varr[a:b] = vt[j]
+        for u in range(w):
+            x[u] = normals[v, u, 0]
+            y[u] = normals[v, u, 1]
+            t[u] = normals[v, u, 2]
+        if half > 0:  # (z / zref)^(half / 2), without a transcendental function
+            for u in range(w):
+                tz = np.float64(z[v, u]) * izref
+                q = math.sqrt(tz)
+                f = tz * tz if half == 4 else (tz * q if half == 3 else (tz if half == 2 else q))
+                varr[u] *= f32(f)
+                e0r[u] *= f32(math.sqrt(f))
+        if use_big:
+            for u in range(w):
+                b = big_s[v, u]
+                take = b <= f32(big_gate) * varr[u]
+                res[u] = b if take else res[u]
+                e0r[u] = e0r[u] * f32(big_ratio) if take else e0r[u]
+        ry = f32((v - cy) / fy)
+        for u in range(w):  # branch-free, float32
+            nx = x[u]
+            ny = y[u]
+            nz = t[u]
+            ok = nx + ny + nz - (nx + ny + nz) == f32(0.0)
+            var = varr[u]
+            ratio = res[u] / var if var > f32(0.0) else one
+            ratio = ratio if ratio > fl else fl
+            ratio = ratio if ratio < cap else cap
+            e = e0r[u] * np.sqrt(ratio)
+            if tilt:  # |e_x - (e_x . n) n|^2 = |e_x|^2 - (e_x . n)^2, e_x = (1, 0, -rx)
+                r_ = rx[u]
+                g = abs(nx * r_ + ny * ry + nz)
+                dx = nx - nz * r_
                 dy = ny - nz * ry
-                sy = 1.0 + ry * ry - dy * dy
-                px = 0.5 * (max(sx, 0.0) + max(sy, 0.0))
-                e *= g * math.sqrt(px)
-            out[v, u] = np.float32(math.degrees(RAYLEIGH_MEAN * e))
+                sx = one + r_ * r_ - dx * dx
+                sy = one + ry * ry - dy * dy
+                sx = sx if sx > f32(0.0) else f32(0.0)
+                sy = sy if sy > f32(0.0) else f32(0.0)
+                e *= g * np.sqrt(f32(0.5) * (sx + sy))
+            out[v, u] = deg * e if ok else nan
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _chord_into(x, y, t, a, b, c, out_acc, out_cnt):
+    """Adds the angle between the normals (x, y, t) and (a, b, c) (``2 asin(k / 2) ~
+    k + k^3 / 24`` from the chord ``k``) where finite, and counts them."""
+    for i in range(out_acc.size):
+        d = x[i] * a[i] + y[i] * b[i] + t[i] * c[i]
+        ok = d == d
+        c2 = 2.0 - 2.0 * d
+        k = np.sqrt(c2 if c2 > np.float32(0.0) else np.float32(0.0))
+        out_acc[i] += k + k * c2 * np.float32(1.0 / 24.0) if ok else np.float32(0.0)
+        out_cnt[i] += np.float32(1.0) if ok else np.float32(0.0)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _spread_rows(v0, v1, normals, base, out):
+def _spread_rows(v0, v1, planar, base, out):
     """Rows ``[v0, v1)`` of the clean-branch map: ``base`` (degrees) plus the mean angle
-    (degrees) between the pixel's normal and the finite normals of its 3x3; NaN where the
-    pixel's normal is NaN."""
-    h, w = normals.shape[:2]
+    (degrees) between the pixel's normal and the finite normals of its four neighbours; NaN
+    where the pixel's normal is NaN. ``planar``: the normals (3, H, W) float32. Every loop runs along a
+    row over contiguous memory."""
+    h, w = planar.shape[1:]
     nan = np.float32(np.nan)
+    acc = np.empty(w, dtype=np.float32)
+    cnt = np.empty(w, dtype=np.float32)
+    b = np.float32(base)
+    dg = np.float32(180.0 / math.pi)
     for v in range(v0, v1):
-        for u in range(w):
-            x = np.float64(normals[v, u, 0])
-            y = np.float64(normals[v, u, 1])
-            t = np.float64(normals[v, u, 2])
-            if not (x + y + t - (x + y + t) == 0.0):
-                out[v, u] = nan
+        x = planar[0, v]
+        y = planar[1, v]
+        t = planar[2, v]
+        acc[:] = 0.0
+        cnt[:] = 0.0
+        for k in range(CROSS.shape[0]):
+            a = v + CROSS[k, 0]
+            du = CROSS[k, 1]
+            if a < 0 or a >= h:
                 continue
-            acc = 0.0
-            m = 0
-            for a in range(max(v - 1, 0), min(v + 2, h)):
-                for b in range(max(u - 1, 0), min(u + 2, w)):
-                    d = (x * normals[a, b, 0] + y * normals[a, b, 1] + t * normals[a, b, 2])
-                    if d == d and not (a == v and b == u):
-                        acc += math.acos(min(1.0, max(-1.0, d)))
-                        m += 1
-            out[v, u] = np.float32(base + (math.degrees(acc / m) if m > 0 else 0.0))
+            lo = max(0, -du)
+            hi = min(w, w - du)
+            _chord_into(x[lo:hi], y[lo:hi], t[lo:hi], planar[0, a, lo + du:hi + du],
+                        planar[1, a, lo + du:hi + du], planar[2, a, lo + du:hi + du],
+                        acc[lo:hi], cnt[lo:hi])
+        for u in range(w):
+            s = x[u] + y[u] + t[u]
+            m = cnt[u]
+            sp = acc[u] / m if m > 0.0 else np.float32(0.0)
+            out[v, u] = b + dg * sp if s - s == 0.0 else nan
 
 
 def _full_suu(r: int) -> float:
@@ -200,7 +268,7 @@ def _box_branch(z, cam, sigma, levels):
     score, big_s = scores
     tiles = _tile_maps(z, fx, fy, sigma, r, levels, NOISE_CLEAN)
     bigs = (big_s, GATE, math.sqrt(_full_suu(r) / _full_suu(big))) if big > r else None
-    unc = _fit_error(z, out, score, r, tiles, (1.0, 0.0, 1.0, True), bigs, cam)
+    unc = _fit_error(z, out, score, r, tiles, (1.0, 0, 1.0, True), bigs, cam)
     return out, unc
 
 
@@ -214,7 +282,8 @@ def _support_branch(z, cam, sigma, prof):
     e = math.radians(prof.error[i]) / RAYLEIGH_MEAN if prof.error[i] == prof.error[i] else 0.0
     tiles = (np.full((1, 1), e), np.full((1, 1), max(prof.residual[i], 1e-30)), max(z.shape) + 1)
     zref = prof.depth if prof.depth == prof.depth else 1.0
-    unc = _fit_error(z, out, score, shift, tiles, (zref, prof.exponent, 0.25, False), None, cam)
+    half = round(2.0 * prof.exponent) if prof.depth == prof.depth else 0
+    unc = _fit_error(z, out, score, shift, tiles, (zref, half, 0.25, False), None, cam)
     return out, unc
 
 
@@ -224,7 +293,8 @@ def _clean_branch(z, cam, sigma):
     s = sigma if sigma == sigma and sigma > 0.0 else 0.0
     base = math.degrees(RAYLEIGH_MEAN * s / math.sqrt(CLEAN_SUU))
     unc = np.empty(z.shape, dtype=np.float32)
-    run_rows(_spread_rows, z.shape[0], out, float(base), unc, min_rows=16)
+    planar = np.ascontiguousarray(out.transpose(2, 0, 1))
+    run_rows(_spread_rows, z.shape[0], planar, float(base), unc, min_rows=16)
     return out, unc
 
 
@@ -236,7 +306,7 @@ def _plain(z, cam, normals, r: int):
     sigma = p.sigma if p.sigma == p.sigma else 0.0
     _, score = box_fit_windows(z, fx, fy, cx, cy, r, normals=False)
     tiles = _tile_maps(z, fx, fy, sigma, r, p.tiles(), 1e-6)
-    return _fit_error(z, normals, score, 0, tiles, (1.0, 0.0, 1.0, True), None, cam)
+    return _fit_error(z, normals, score, 0, tiles, (1.0, 0, 1.0, True), None, cam)
 
 
 def normals_with_uncertainty(compute, depth: Any, K: Any, *, method: str,
@@ -309,7 +379,7 @@ def uncertainty_to_kappa(err_deg: Any) -> np.ndarray:
     --------
     >>> import depthnormals as dn
     >>> round(float(dn.uncertainty_to_kappa(1.0)), 1)
-    5157.0
+    5156.6
     """
     e = np.radians(np.asarray(err_deg, dtype=np.float64))
     if np.any(e < 0):
