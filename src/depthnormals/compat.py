@@ -5,14 +5,11 @@ order, the same shapes, units and layout) and returns **our default's normals** 
 ``method="3f2n+"``) in that caller's conventions: orientation, layout, units and the value
 where no normal exists.
 
-========================== ================================================ ==============
-function                   replaces                                         needs
-========================== ================================================ ==============
-:func:`depth_to_normals`   ``kornia.geometry.depth.depth_to_normals``       torch
-:func:`gsplat_depth_to_normal` ``gsplat.utils.depth_to_normal`` (and 2DGS's  torch
-                           ``utils.point_utils.depth_to_normal``)
-:func:`depth_normal`       FFB6D's ``normalSpeed.depth_normal``             numpy only
-========================== ================================================ ==============
+- :func:`depth_to_normals` replaces kornia's ``kornia.geometry.depth.depth_to_normals``
+  (needs torch);
+- :func:`gsplat_depth_to_normal` replaces gsplat's ``gsplat.utils.depth_to_normal``, and
+  through a documented mapping 2DGS's ``utils.point_utils.depth_to_normal`` (needs torch);
+- :func:`depth_normal` replaces FFB6D's ``normalSpeed.depth_normal`` (numpy only).
 
 The torch drop-ins call :func:`depthnormals.torch.estimate_normals` (imported when called, so
 ``import depthnormals.compat`` does not import torch); on noisy sensor depth its default is
