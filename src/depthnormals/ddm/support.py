@@ -465,7 +465,8 @@ def support_select(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
     choice of its 2x2 cell: a window of 13 pixels or more loses little by it, and the branch
     costs about a third. ``out_scores``: a list that receives the residual variances of the
     chosen radius's windows (footprints^2 of the profile; on every second row and column from
-    :data:`HALF_RADIUS` on) and their shift, for the uncertainty map
+    :data:`HALF_RADIUS` on), their shift and the normals of that half grid (None below
+    :data:`HALF_RADIUS`), for the uncertainty map
     (:mod:`depthnormals.ddm.uncertainty`); the normals do not change."""
     p = support_profile(z, fx, fy, cx, cy, sigma) if profile is None else profile
     h, w = z.shape
@@ -474,17 +475,17 @@ def support_select(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
         args = choice_inputs(z, fx, fy, cx, cy, p)
         run_rows(_choose_least_rows, h, z, *args, out, min_rows=16)
         if out_scores is not None:
-            out_scores.extend((args[0][1], args[2]))
+            out_scores.extend((args[0][1], args[2], None))
         return out
     zd = np.ascontiguousarray(z[::2, ::2])
     cam = (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy)
     args = choice_inputs(zd, *cam, p, radius=round(p.radius / 2), score_scale=4.0)
-    if out_scores is not None:
-        out_scores.extend((args[0][1], args[2]))
     # the choice reads depth only for the gates' growth and for validity: every cell chooses
     zfill = np.where(np.isnan(zd), zd.dtype.type(p.depth if p.depth == p.depth else 1.0), zd)
     half = np.empty((zd.shape[0], zd.shape[1], 3), dtype=np.float32)
     run_rows(_choose_least_rows, zd.shape[0], zfill, *args, half, min_rows=8)
+    if out_scores is not None:
+        out_scores.extend((args[0][1], args[2], half))
     run_rows(_upsample_rows, h, z, half, (float(fx), float(fy), float(cx), float(cy)), out,
              min_rows=16)
     return out

@@ -1,0 +1,219 @@
+"""Calibration of the expected-error map (``estimate_normals(..., return_uncertainty=True)``).
+
+For every column of data with a reference normal, the pixels where both the estimate and the
+reference are finite are binned by deciles of the predicted error; per bin the mean observed
+angular error is printed beside the mean prediction (the reliability table), with the Spearman
+rank correlation of prediction and error over all pixels. A bin passes when the observed mean
+is within 25 % of the predicted one, or within 0.5 deg where both are below 2 deg.
+
+Columns:
+
+- ``analytic``: the scenes of :mod:`depthnormals.analytic` with Gaussian depth noise of 0.1
+  footprints (``z (1 + 0.1 n / fx)``);
+- ``synth/<variant>``: a synthetic benchmark folder (``--synth``, made by ``depthnormals synth
+  /tmp/u-synth --indoor 2 --outdoor 2 --views 2 --seed 0 --noise
+  gaussian,kinect_v1,kinect_v2,tof,realsense_d4xx --scenes procedural``), one column per sensor
+  model (and ``clean``);
+- ``real/<folder>``: the real frames of ``../shared/data/real-sensors`` against their plane
+  references (``plane_reference`` with ``sensor_threshold``; interiors and rims), and ``real``
+  over all of them.
+
+    python benchmarks/uncertainty_calibration.py [--method 3f2n+] [--synth /tmp/u-synth]
+        [--real ../shared/data/real-sensors] [--json OUT] [--figure PNG]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+import depthnormals as dn
+
+ROOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "real-sensors"
+#: A decile bin passes when |observed - predicted| <= REL_TOL predicted, or <= ABS_TOL deg where
+#: both are below ABS_BELOW deg.
+REL_TOL, ABS_TOL, ABS_BELOW = 0.25, 0.5, 2.0
+BINS = 10
+
+
+def spearman(a: np.ndarray, b: np.ndarray) -> float:
+    """Spearman's rank correlation (average ranks for ties), numpy only."""
+    def ranks(x):
+        order = np.argsort(x, kind="stable")
+        xs = x[order]
+        r = np.empty(x.size)
+        r[order] = np.arange(x.size, dtype=np.float64)
+        # average the ranks of ties
+        _, first, counts = np.unique(xs, return_index=True, return_counts=True)
+        if np.any(counts > 1):
+            avg = first + (counts - 1) / 2.0
+            r[order] = np.repeat(avg, counts)
+        return r
+
+    if a.size < 3:
+        return float("nan")
+    ra, rb = ranks(a), ranks(b)
+    ra -= ra.mean()
+    rb -= rb.mean()
+    den = np.sqrt((ra * ra).sum() * (rb * rb).sum())
+    return float((ra * rb).sum() / den) if den > 0 else float("nan")
+
+
+def reliability(pred: np.ndarray, obs: np.ndarray, bins: int = BINS) -> list[dict]:
+    """Pixels binned by deciles of ``pred``: per bin its mean prediction and observation."""
+    order = np.argsort(pred, kind="stable")
+    out = []
+    for part in np.array_split(order, bins):
+        if part.size == 0:
+            continue
+        p, o = float(pred[part].mean()), float(obs[part].mean())
+        ok = abs(o - p) <= REL_TOL * p or (p < ABS_BELOW and o < ABS_BELOW and abs(o - p) <= ABS_TOL)
+        out.append({"n": int(part.size), "predicted": p, "observed": o, "pass": bool(ok)})
+    return out
+
+
+class Column:
+    """The (prediction, observation) pairs of one column."""
+
+    def __init__(self) -> None:
+        self.pred: list[np.ndarray] = []
+        self.obs: list[np.ndarray] = []
+
+    def add(self, unc: np.ndarray, err: np.ndarray, mask: np.ndarray | None = None) -> None:
+        ok = np.isfinite(unc) & np.isfinite(err)
+        if mask is not None:
+            ok &= mask
+        self.pred.append(unc[ok].astype(np.float64))
+        self.obs.append(err[ok].astype(np.float64))
+
+    def summary(self) -> dict:
+        p = np.concatenate(self.pred) if self.pred else np.empty(0)
+        o = np.concatenate(self.obs) if self.obs else np.empty(0)
+        table = reliability(p, o) if p.size >= BINS else []
+        return {"pixels": int(p.size), "spearman": spearman(p, o),
+                "mean_predicted": float(p.mean()) if p.size else float("nan"),
+                "mean_observed": float(o.mean()) if o.size else float("nan"),
+                "bins_passed": sum(b["pass"] for b in table), "bins": table}
+
+
+def analytic_columns(method: str, noise: float, seed: int) -> dict[str, Column]:
+    from depthnormals.analytic import make_scene, scene_names
+
+    col = Column()
+    rng = np.random.default_rng(seed)
+    for name in scene_names():
+        r = make_scene(name).render()
+        fx = dn.as_intrinsics(r.K).fx
+        d = r.depth * (1.0 + noise * rng.standard_normal(r.depth.shape) / fx)
+        n, u = dn.estimate_normals(d.astype(np.float32), r.K, method=method, return_uncertainty=True)
+        col.add(u, dn.angular_error(n, r.normals))
+    return {"analytic": col}
+
+
+def synth_columns(root: Path, method: str) -> dict[str, Column]:
+    from depthnormals.datasets.synthetic import read_synthetic
+
+    cols: dict[str, Column] = {}
+    for f in read_synthetic(root):
+        variant = f.meta.get("variant", f.group.rsplit("/", 1)[-1])
+        n, u = dn.estimate_normals(f.depth, f.K, method=method, return_uncertainty=True)
+        cols.setdefault(f"synth/{variant}", Column()).add(u, dn.angular_error(n, f.normals),
+                                                          f.mask)
+    return cols
+
+
+def real_columns(root: Path, method: str, seed: int) -> dict[str, Column]:
+    from depthnormals.datasets import open as open_dataset
+    from depthnormals.evaluate import plane_reference, sensor_threshold
+
+    cols: dict[str, Column] = {"real": Column()}
+    for f in open_dataset(root):
+        ref = plane_reference(f.depth, f.K, seed=seed, threshold=sensor_threshold(f.meta))
+        n, u = dn.estimate_normals(f.depth, f.K, method=method, return_uncertainty=True)
+        lab = ref.labels
+        g = np.full(n.shape, np.nan, dtype=np.float64)
+        has = lab >= 0
+        g[has] = ref.normals[lab[has]]
+        err = dn.angular_error(n, g.astype(np.float32))
+        mask = ref.interior | ref.rim
+        group = str(f.group).split("/")[0]
+        cols.setdefault(f"real/{group}", Column()).add(u, err, mask)
+        cols["real"].add(u, err, mask)
+    return cols
+
+
+def _print(name: str, s: dict) -> None:
+    print(f"\n{name}: {s['pixels']} px, Spearman {s['spearman']:.3f}, mean predicted "
+          f"{s['mean_predicted']:.3f} deg, observed {s['mean_observed']:.3f} deg, "
+          f"bins passed {s['bins_passed']}/{len(s['bins'])}")
+    print("  bin  predicted  observed  ratio  pass")
+    for i, b in enumerate(s["bins"]):
+        ratio = b["observed"] / b["predicted"] if b["predicted"] > 0 else float("nan")
+        print(f"  {i + 1:3d}  {b['predicted']:9.3f}  {b['observed']:8.3f}  {ratio:5.2f}  "
+              f"{'yes' if b['pass'] else 'NO'}")
+
+
+def _figure(results: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = [k for k, v in results.items() if v["bins"]]
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 5))
+    top = 0.0
+    for k in names:
+        p = [b["predicted"] for b in results[k]["bins"]]
+        o = [b["observed"] for b in results[k]["bins"]]
+        ax.loglog(p, o, "o-", ms=3, label=k)
+        top = max(top, max(p), max(o))
+    lo = 1e-3
+    ax.plot([lo, top], [lo, top], "k--", lw=0.8)
+    ax.set_xlabel("mean predicted error per decile (deg)")
+    ax.set_ylabel("mean observed error (deg)")
+    ax.set_title("reliability")
+    ax.legend(fontsize=7)
+    bx.barh(names, [results[k]["spearman"] for k in names])
+    bx.axvline(0.6, color="k", ls="--", lw=0.8)
+    bx.axvline(0.5, color="grey", ls=":", lw=0.8)
+    bx.set_xlabel("Spearman rank correlation")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--method", default="3f2n+")
+    ap.add_argument("--noise", type=float, default=0.1, help="analytic scenes' noise (footprints)")
+    ap.add_argument("--synth", type=Path, default=None, help="synthetic benchmark folder")
+    ap.add_argument("--real", type=Path, default=ROOT, help="real-sensor folder ('' to skip)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--figure", type=Path, default=None)
+    a = ap.parse_args(argv)
+    cols = analytic_columns(a.method, a.noise, a.seed)
+    if a.synth is not None:
+        cols.update(synth_columns(a.synth, a.method))
+    if str(a.real) and Path(a.real).exists():
+        cols.update(real_columns(Path(a.real), a.method, a.seed))
+    results = {k: c.summary() for k, c in cols.items()}
+    for k, s in results.items():
+        _print(k, s)
+    print("\nsummary: column, Spearman, bins passed")
+    for k, s in results.items():
+        print(f"  {k:40s} {s['spearman']:6.3f}  {s['bins_passed']}/{len(s['bins'])}")
+    if a.json is not None:
+        a.json.write_text(json.dumps({"method": a.method, "noise": a.noise, "seed": a.seed,
+                                      "synth": str(a.synth), "real": str(a.real),
+                                      "columns": results}, indent=1))
+    if a.figure is not None:
+        _figure(results, a.figure)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
