@@ -110,3 +110,54 @@ def test_import_stays_light():
             "print(any(m in sys.modules for m in ('torch', 'matplotlib')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def _cli_inputs(tmp_path):
+    import json
+
+    r, d = _plane(0.1, shape=(48, 64))
+    K = dn.as_intrinsics(r.K)
+    (tmp_path / "k.json").write_text(json.dumps({"fx": K.fx, "fy": K.fy, "cx": K.cx, "cy": K.cy}))
+    (tmp_path / "in").mkdir()
+    np.save(tmp_path / "in" / "a.npy", d.astype(np.float32))
+    np.save(tmp_path / "in" / "b.npy", d.astype(np.float32))
+    return r, d
+
+
+def test_cli_single_file_writes_uncertainty(tmp_path):
+    from depthnormals.cli import main
+
+    r, d = _cli_inputs(tmp_path)
+    out = tmp_path / "out" / "a.vis.png"
+    assert main(["estimate", str(tmp_path / "in" / "a.npy"), "-K", str(tmp_path / "k.json"),
+                 "-o", str(out), "--uncertainty"]) == 0
+    u = np.load(tmp_path / "out" / "a.uncertainty.npy")
+    _, want = dn.estimate_normals(d.astype(np.float32), r.K, return_uncertainty=True)
+    np.testing.assert_array_equal(u, want)
+
+
+def test_cli_many_records_the_flag(tmp_path):
+    import json
+
+    from depthnormals.cli import main
+    from depthnormals.jobs import MANIFEST
+
+    _cli_inputs(tmp_path)
+    out = tmp_path / "many"
+    assert main(["estimate", str(tmp_path / "in"), "-K", str(tmp_path / "k.json"), "-o", str(out),
+                 "--uncertainty", "-q"]) == 0
+    assert sorted(p.name for p in out.rglob("*.uncertainty.npy")) == ["a.uncertainty.npy",
+                                                                      "b.uncertainty.npy"]
+    settings = json.loads((out / MANIFEST).read_text())["settings"]
+    assert settings["uncertainty"] is True
+    # without the flag the manifest differs: a resumed run is refused
+    assert main(["estimate", str(tmp_path / "in"), "-K", str(tmp_path / "k.json"), "-o", str(out),
+                 "-q"]) != 0
+
+
+def test_cli_unsupported_method(tmp_path):
+    from depthnormals.cli import main
+
+    _cli_inputs(tmp_path)
+    assert main(["estimate", str(tmp_path / "in"), "-K", str(tmp_path / "k.json"), "-o",
+                 str(tmp_path / "x"), "--uncertainty", "-m", "d2nt", "-q"]) != 0

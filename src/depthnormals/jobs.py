@@ -42,7 +42,8 @@ from .camera import Intrinsics, as_intrinsics
 from .io import DEPTH_SUFFIXES, VIS_CONVENTIONS, not_depth_reason
 
 __all__ = ["FORMATS", "MANIFEST", "EstimateJob", "EstimateSettings", "RunSummary", "SettingsMismatch",
-           "estimate_job", "manifest_settings", "plan_estimate", "run_estimate"]
+           "estimate_job", "manifest_settings", "normals_and_uncertainty", "plan_estimate",
+           "run_estimate", "uncertainty_path", "write_uncertainty"]
 
 #: The manifest file of an output folder (see the module docstring).
 MANIFEST = "depthnormals-manifest.json"
@@ -56,7 +57,8 @@ _MAGIC = set("*?[")
 @dataclass(frozen=True)
 class EstimateSettings:
     """What every frame of a run shares: the method, its options, how depth files are read
-    (scale, invalid raw codes, maximum depth in metres) and the ``.vis.png`` colouring."""
+    (scale, invalid raw codes, maximum depth in metres), the ``.vis.png`` colouring and whether
+    the expected-error map is written beside each output (:func:`uncertainty_path`)."""
 
     method: str
     options: Mapping[str, Any] = field(default_factory=dict)
@@ -64,6 +66,7 @@ class EstimateSettings:
     invalid: tuple[float, ...] = ()
     max_depth: float | None = None
     vis: str = "3f2n"
+    uncertainty: bool = False
 
 
 class SettingsMismatch(ValueError):
@@ -259,6 +262,42 @@ def plan_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, K: Any =
             raise FileNotFoundError(f"input {text} does not exist")
 
 
+def uncertainty_path(output: str | Path) -> Path:
+    """Where the expected-error map of the normals at ``output`` goes:
+    ``<name>.uncertainty.npy`` beside them (``n.vis.png`` -> ``n.uncertainty.npy``)."""
+    p = Path(output)
+    name = p.name
+    for suffix in (".vis.png", ".png", ".npy", ".ply"):
+        if name.lower().endswith(suffix):
+            name = name[:-len(suffix)]
+            break
+    return p.with_name(name + ".uncertainty.npy")
+
+
+def write_uncertainty(path: str | Path, uncertainty: np.ndarray) -> None:
+    """Write an expected-error map (float32 (H, W), degrees) as ``.npy``, atomically."""
+    import io as _io
+
+    from .io import write_bytes_atomic
+
+    buf = _io.BytesIO()
+    np.save(buf, np.asarray(uncertainty, dtype=np.float32))
+    write_bytes_atomic(path, buf.getvalue())
+
+
+def normals_and_uncertainty(depth: np.ndarray, K: Any, method: str, options: Mapping[str, Any],
+                            uncertainty: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    """The normals of ``method`` and, with ``uncertainty``, their expected-error map (else
+    None): the registry's ``compute_normals`` / ``return_uncertainty=True``."""
+    from .ddm.uncertainty import normals_with_uncertainty
+    from .registry import compute_normals
+
+    if not uncertainty:
+        return compute_normals(depth, K, method=method, **dict(options)), None
+    return normals_with_uncertainty(compute_normals, depth, K, method=method, depth_scale=None,
+                                    options=dict(options))
+
+
 def _write(path: Path, normals: np.ndarray, depth: np.ndarray, K: Intrinsics, vis: str = "3f2n") -> None:
     from . import io
 
@@ -276,7 +315,6 @@ def estimate_job(job: EstimateJob, settings: EstimateSettings) -> tuple[str, int
     error names the input file.
     """
     from .io import read_depth
-    from .registry import compute_normals
 
     if job.source is not None:
         depth = read_depth(job.source, depth_scale=settings.depth_scale, invalid=settings.invalid,
@@ -286,13 +324,16 @@ def estimate_job(job: EstimateJob, settings: EstimateSettings) -> tuple[str, int
         if settings.max_depth is not None:
             depth = np.where(depth > settings.max_depth, np.nan, depth).astype(depth.dtype)
     try:
-        normals = compute_normals(depth, job.K, method=settings.method, **dict(settings.options))
+        normals, unc = normals_and_uncertainty(depth, job.K, settings.method, settings.options,
+                                               settings.uncertainty)
     except (ValueError, TypeError) as exc:
         where = str(job.source) if job.source is not None else job.label
         if where in str(exc):
             raise
         raise type(exc)(f"{where}: {exc}") from exc
     job.output.parent.mkdir(parents=True, exist_ok=True)
+    if unc is not None:  # first: a finished output implies its map (resume checks the output)
+        write_uncertainty(uncertainty_path(job.output), unc)
     _write(job.output, normals, depth, job.K, settings.vis)
     return str(job.output), int(np.count_nonzero(np.isfinite(normals[..., 0])))
 
@@ -300,8 +341,10 @@ def estimate_job(job: EstimateJob, settings: EstimateSettings) -> tuple[str, int
 def manifest_settings(settings: EstimateSettings, K: Any, fmt: str) -> dict[str, Any]:
     """The settings a manifest records and a resumed run must match: method, options, depth
     scale, invalid codes, maximum depth, intrinsics (None: each dataset frame's own),
-    output format and, for ``vis.png``, the colouring."""
+    output format and, for ``vis.png``, the colouring; ``"uncertainty": True`` when the
+    expected-error maps are written (absent otherwise, so older manifests still match)."""
     cam = None if K is None else as_intrinsics(K)
+    extra = {"uncertainty": True} if settings.uncertainty else {}
     return {
         "method": settings.method,
         "options": json.loads(json.dumps(dict(settings.options), sort_keys=True, default=repr)),
@@ -311,6 +354,7 @@ def manifest_settings(settings: EstimateSettings, K: Any, fmt: str) -> dict[str,
         "intrinsics": None if cam is None else {"fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy},
         "format": fmt,
         "vis": settings.vis if fmt == "vis.png" else None,
+        **extra,
     }
 
 
@@ -372,7 +416,7 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
                  fmt: str = "npy", resume: bool = True, progress: bool = False,
                  scheduler: str | None = None, batch_size: int = 16, client: Any = None,
                  invalid: Sequence[float] = (), max_depth: float | None = None,
-                 vis: str = "3f2n") -> RunSummary:
+                 vis: str = "3f2n", uncertainty: bool = False) -> RunSummary:
     """Estimate the normals of every frame of ``inputs`` into ``out_dir``.
 
     Parameters
@@ -405,6 +449,11 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
         Depth beyond this many metres is invalid.
     vis : {"3f2n", "open3d"}
         Colouring of ``vis.png`` outputs (:func:`depthnormals.io.normals_to_rgb8`).
+    uncertainty : bool, default False
+        Also write each frame's expected angular error (degrees, float32 (H, W)) to
+        ``<name>.uncertainty.npy`` beside its output (:func:`uncertainty_path`, atomically,
+        before the normals); recorded in the manifest. Only for the methods of
+        ``return_uncertainty=True``.
 
     Returns
     -------
@@ -424,8 +473,15 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
     check_choice(vis, "vis", VIS_CONVENTIONS)
     if fmt not in FORMATS:
         raise ValueError(f"output format {fmt!r} not known; use one of {', '.join(FORMATS)}")
+    if uncertainty:
+        from .ddm.uncertainty import UNCERTAINTY_METHODS
+
+        if method not in UNCERTAINTY_METHODS:
+            raise ValueError(f"--uncertainty (uncertainty=True) is supported for methods "
+                             f"{', '.join(UNCERTAINTY_METHODS)}; got method {method!r}")
     settings = EstimateSettings(method, dict(options or {}), depth_scale, tuple(float(c) for c in invalid),
-                                check_positive(max_depth, "max_depth", allow_none=True), vis)
+                                check_positive(max_depth, "max_depth", allow_none=True), vis,
+                                bool(uncertainty))
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise ValueError(f"output {out} exists and is not a folder")

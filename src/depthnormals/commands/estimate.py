@@ -56,6 +56,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--shape", type=parse_shape, default=None, metavar="H,W",
                         help="rows,columns of a raw .bin depth file (default 480,640, the 3F2N "
                              "format); for other formats it must match the file")
+    parser.add_argument("--uncertainty", action="store_true",
+                        help="also write the expected angular error (deg, float32) of every normal to "
+                             "<name>.uncertainty.npy beside the output (3f2n+, fals, PCL's modes)")
     parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                         help="estimator option, e.g. --option kernel=sobel (repeatable; JSON values)")
     many = parser.add_argument_group("many inputs (output folder -o DIR)")
@@ -165,7 +168,8 @@ def run_many(args: argparse.Namespace) -> int:
     s = run_estimate(args.depth, args.output, method=method, K=None if camera is None else camera.K,
                      options=parse_options(args.option), depth_scale=rs.depth_scale, fmt=args.format,
                      resume=not args.no_resume, progress=not args.quiet, scheduler=args.scheduler,
-                     batch_size=args.batch_size, invalid=rs.invalid, max_depth=rs.max_depth, vis=args.vis)
+                     batch_size=args.batch_size, invalid=rs.invalid, max_depth=rs.max_depth, vis=args.vis,
+                     uncertainty=args.uncertainty)
     print(f"{args.output}: {s.planned} frames by {method} ({s.written} computed, {s.skipped} done "
           f"before) in {s.seconds:.1f} s")
     if s.not_depth:
@@ -212,8 +216,12 @@ def estimate_file(depth_path: Path, intrinsics_path: Path, output: Path, *,
                   method: str | None = None, depth_scale: float | None = None,
                   shape: tuple[int, int] | None = None,
                   options: dict[str, Any] | None = None, invalid: tuple[float, ...] = (),
-                  max_depth: float | None = None, vis: str = "3f2n") -> EstimateReport:
+                  max_depth: float | None = None, vis: str = "3f2n",
+                  uncertainty: bool = False) -> EstimateReport:
     """Read one depth file and its intrinsics, estimate the normals, write them atomically.
+
+    With ``uncertainty``, the expected angular error of every normal goes to
+    ``<name>.uncertainty.npy`` beside ``output`` (:func:`depthnormals.jobs.uncertainty_path`).
 
     The normals are written even when none is finite (``valid_normals == 0`` in the report
     says so; ``valid_depth == 0`` when no depth pixel is valid). The output's folder is
@@ -224,7 +232,8 @@ def estimate_file(depth_path: Path, intrinsics_path: Path, output: Path, *,
     import numpy as np
 
     from ..io import read_depth, read_intrinsics, write_normals, write_ply
-    from ..registry import DEFAULT_METHOD, compute_normals
+    from ..jobs import normals_and_uncertainty, uncertainty_path, write_uncertainty
+    from ..registry import DEFAULT_METHOD
 
     check_output(output)
     depth = read_depth(depth_path, depth_scale=depth_scale, shape=shape, invalid=invalid,
@@ -236,17 +245,22 @@ def estimate_file(depth_path: Path, intrinsics_path: Path, output: Path, *,
     method = method or DEFAULT_METHOD
     t0 = time.perf_counter()
     try:
-        normals = compute_normals(depth, K, method=method, **(options or {}))
+        normals, unc = normals_and_uncertainty(depth, K, method, options or {}, uncertainty)
     except (ValueError, TypeError) as exc:
         raise type(exc)(f"{depth_path}: {exc}") from exc
     ms = (time.perf_counter() - t0) * 1e3
     created = _make_parents(output.parent)
     try:
+        if unc is not None:
+            write_uncertainty(uncertainty_path(output), unc)
         if output.name.lower().endswith(".ply"):  # a point cloud: valid points with their normals
             write_ply(output, depth, K, normals)
         else:
             write_normals(output, normals, vis=vis)
     except BaseException:
+        if unc is not None:
+            with contextlib.suppress(OSError):
+                uncertainty_path(output).unlink()
         for folder in reversed(created):
             with contextlib.suppress(OSError):
                 folder.rmdir()
@@ -280,7 +294,7 @@ def run(args: argparse.Namespace) -> int:
     rep = estimate_file(args.depth, args.intrinsics, args.output, method=args.method,
                         depth_scale=rs.depth_scale, shape=args.shape,
                         options=parse_options(args.option), invalid=rs.invalid, max_depth=rs.max_depth,
-                        vis=args.vis)
+                        vis=args.vis, uncertainty=args.uncertainty)
     print(f"{rep.output}: {rep.shape[1]}x{rep.shape[0]} normals by {rep.method} "
           f"({rep.valid_normals} valid pixels, {rep.ms:.1f} ms)")
     if rep.valid_normals == 0:
