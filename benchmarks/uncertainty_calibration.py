@@ -190,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--method", default="3f2n+")
     ap.add_argument("--noise", type=float, default=0.1, help="analytic scenes' noise (footprints)")
     ap.add_argument("--synth", type=Path, default=None, help="synthetic benchmark folder")
-    ap.add_argument("--real", type=Path, default=ROOT, help="real-sensor folder ('' to skip)")
+    ap.add_argument("--real", default=str(ROOT), help="real-sensor folder ('' to skip)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--figure", type=Path, default=None)
@@ -198,7 +198,7 @@ def main(argv: list[str] | None = None) -> int:
     cols = analytic_columns(a.method, a.noise, a.seed)
     if a.synth is not None:
         cols.update(synth_columns(a.synth, a.method))
-    if str(a.real) and Path(a.real).exists():
+    if a.real and Path(a.real).exists():
         cols.update(real_columns(Path(a.real), a.method, a.seed))
     results = {k: c.summary() for k, c in cols.items()}
     for k, s in results.items():

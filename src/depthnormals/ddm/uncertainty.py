@@ -26,9 +26,8 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
   residual does (``(z / z_ref)^(gamma / 2)``) and scaled by ``sqrt(residual / expected)``, the
   chosen window's residual over the median residual at its depth;
 - **clean depth** (the plane hypotheses): the float rounding of the one-pixel stencils
-  (``sigma / sqrt(6)``) plus, where the normals of the 3x3 disagree (an edge, a crease: where
-  the hypotheses' scores say no stencil fits), the mean angle of its four neighbours' normals to
-  the pixel's normal.
+  (``sigma / sqrt(6)``) plus, where the pixel's normal agrees with none of its four neighbours'
+  (a facet narrower than two pixels: no one-sided stencil fits), the least angle between them.
 
 One vectorised pass per image (:func:`_fit_error_rows`, :func:`_spread_rows`) over quantities
 the branches already computed. Conversions to the von Mises-Fisher concentration of Bae et al.
@@ -239,22 +238,22 @@ def _chord_into(x, y, t, a, b, c, out_acc, out_cnt):
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _spread_rows(v0, v1, planar, base, out):
-    """Rows ``[v0, v1)`` of the clean-branch map: ``base`` (degrees) plus the mean angle
-    (degrees) between the pixel's normal and the finite normals of its four neighbours; NaN
-    where the pixel's normal is NaN. ``planar``: the normals (3, H, W) float32. Every loop runs along a
-    row over contiguous memory."""
+    """Rows ``[v0, v1)`` of the clean-branch map: ``base`` (degrees) plus the least angle
+    (degrees) between the pixel's normal and the finite normals of its four neighbours (0
+    without one); NaN where the pixel's normal is NaN. The plane hypotheses are exact wherever a
+    neighbour lies on the pixel's plane (a facet two pixels wide), so only a pixel that agrees
+    with none of them is uncertain. ``planar``: the normals (3, H, W) float32. Every loop runs
+    along a row over contiguous memory."""
     h, w = planar.shape[1:]
     nan = np.float32(np.nan)
-    acc = np.empty(w, dtype=np.float32)
-    cnt = np.empty(w, dtype=np.float32)
+    best = np.empty(w, dtype=np.float32)
     b = np.float32(base)
     dg = np.float32(180.0 / math.pi)
     for v in range(v0, v1):
         x = planar[0, v]
         y = planar[1, v]
         t = planar[2, v]
-        acc[:] = 0.0
-        cnt[:] = 0.0
+        best[:] = np.inf
         for k in range(CROSS.shape[0]):
             a = v + CROSS[k, 0]
             du = CROSS[k, 1]
@@ -262,14 +261,26 @@ def _spread_rows(v0, v1, planar, base, out):
                 continue
             lo = max(0, -du)
             hi = min(w, w - du)
-            _chord_into(x[lo:hi], y[lo:hi], t[lo:hi], planar[0, a, lo + du:hi + du],
-                        planar[1, a, lo + du:hi + du], planar[2, a, lo + du:hi + du],
-                        acc[lo:hi], cnt[lo:hi])
+            _chord_min_into(x[lo:hi], y[lo:hi], t[lo:hi], planar[0, a, lo + du:hi + du],
+                            planar[1, a, lo + du:hi + du], planar[2, a, lo + du:hi + du],
+                            best[lo:hi])
         for u in range(w):
             s = x[u] + y[u] + t[u]
-            m = cnt[u]
-            sp = acc[u] / m if m > 0.0 else np.float32(0.0)
+            sp = best[u] if best[u] < np.inf else np.float32(0.0)
             out[v, u] = b + dg * sp if s - s == 0.0 else nan
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _chord_min_into(x, y, t, a, b, c, out_best):
+    """``out_best = min(out_best, angle)`` between the normals (x, y, t) and (a, b, c) where
+    finite (the angle from the chord as in :func:`_chord_into`)."""
+    for i in range(out_best.size):
+        d = x[i] * a[i] + y[i] * b[i] + t[i] * c[i]
+        c2 = 2.0 - 2.0 * d
+        k = np.sqrt(c2 if c2 > np.float32(0.0) else np.float32(0.0))
+        ang = k + k * c2 * np.float32(1.0 / 24.0)
+        cur = out_best[i]
+        out_best[i] = ang if (d == d) & (ang < cur) else cur
 
 
 def _full_suu(r: int) -> float:
