@@ -19,7 +19,11 @@ Columns:
   over all of them.
 
     python benchmarks/uncertainty_calibration.py [--method 3f2n+] [--synth /tmp/u-synth]
-        [--real ../shared/data/real-sensors] [--json OUT] [--figure PNG]
+        [--real ../shared/data/real-sensors] [--json OUT] [--figure PNG] [--speed]
+
+``--speed``: instead, the single-thread time of ``method`` with and without the map on every
+real frame and one frame per synthetic variant (median of 7, interleaved per frame), and the
+ratio.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -146,6 +151,44 @@ def real_columns(root: Path, method: str, seed: int) -> dict[str, Column]:
     return cols
 
 
+def speed(method: str, synth: Path | None, real: str, repeats: int = 7) -> None:
+    """Print the time of ``method`` with and without ``return_uncertainty`` per frame."""
+    import time
+
+    from depthnormals.datasets import open as open_dataset
+    from depthnormals.datasets.synthetic import read_synthetic
+
+    dn.set_num_threads(1)
+    frames = []
+    if real and Path(real).exists():
+        frames += [(f"real/{f.group}", f.depth, f.K) for f in open_dataset(real)]
+    seen: set = set()
+    for f in read_synthetic(synth) if synth is not None else ():
+        v = f.group.rsplit("/", 1)[-1]
+        if v not in seen:
+            seen.add(v)
+            frames.append((f"synth/{v}", f.depth, f.K))
+    total = [0.0, 0.0]
+    for name, d, K in frames:
+        fns = (partial(dn.estimate_normals, d, K, method=method),
+               partial(dn.estimate_normals, d, K, method=method, return_uncertainty=True))
+        ts: list[list[float]] = [[], []]
+        for fn in fns:
+            fn()
+        for _ in range(repeats):
+            for j, fn in enumerate(fns):
+                t = time.perf_counter()
+                fn()
+                ts[j].append(time.perf_counter() - t)
+        a, b = (float(np.median(t)) for t in ts)
+        total[0] += a
+        total[1] += b
+        print(f"{name:42s} {d.shape[1]}x{d.shape[0]}  {a * 1e3:7.2f} ms  with the map "
+              f"{b * 1e3:7.2f} ms  x{b / a:.2f}")
+    if frames:
+        print(f"all frames: x{total[1] / total[0]:.2f}")
+
+
 def _print(name: str, s: dict) -> None:
     print(f"\n{name}: {s['pixels']} px, Spearman {s['spearman']:.3f}, mean predicted "
           f"{s['mean_predicted']:.3f} deg, observed {s['mean_observed']:.3f} deg, "
@@ -194,7 +237,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--figure", type=Path, default=None)
+    ap.add_argument("--speed", action="store_true", help="time with and without the map instead")
     a = ap.parse_args(argv)
+    if a.speed:
+        speed(a.method, a.synth, a.real)
+        return 0
     cols = analytic_columns(a.method, a.noise, a.seed)
     if a.synth is not None:
         cols.update(synth_columns(a.synth, a.method))
