@@ -161,3 +161,16 @@ def test_cli_unsupported_method(tmp_path):
     _cli_inputs(tmp_path)
     assert main(["estimate", str(tmp_path / "in"), "-K", str(tmp_path / "k.json"), "-o",
                  str(tmp_path / "x"), "--uncertainty", "-m", "d2nt", "-q"]) != 0
+
+
+def test_covariance_in_the_tangent_plane():
+    r, d = _plane(0.1, shape=(24, 32))
+    n, u = dn.estimate_normals(d, r.K, return_uncertainty=True)
+    c = dn.uncertainty_to_covariance(n, u).astype(np.float64)
+    assert c.shape == (24, 32, 3, 3)
+    ok = np.isfinite(u)
+    np.testing.assert_allclose(np.einsum("...ij,...j->...i", c, n)[ok], 0.0, atol=1e-9)
+    s2 = np.radians(u[ok].astype(np.float64)) ** 2 / (math.pi / 2)
+    np.testing.assert_allclose(np.trace(c, axis1=-2, axis2=-1)[ok], 2 * s2, rtol=1e-4)
+    with pytest.raises(ValueError, match="shape"):
+        dn.uncertainty_to_covariance(n, u[:2])

@@ -24,7 +24,7 @@ from .ddm import (
     estimate_noise_map,
     noise_profile,
 )
-from .ddm.uncertainty import kappa_to_uncertainty, uncertainty_to_kappa
+from .ddm.uncertainty import kappa_to_uncertainty, uncertainty_to_covariance, uncertainty_to_kappa
 from .estimators import (
     angle_weighted,
     area_weighted,
@@ -83,6 +83,7 @@ __all__ = [
     "sri",
     "three_filters_to_normal",
     "to_open3d",
+    "uncertainty_to_covariance",
     "uncertainty_to_kappa",
     "vector_svd",
 ]

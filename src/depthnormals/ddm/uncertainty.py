@@ -58,7 +58,7 @@ from .noise import TILE, noise_pass
 from .support import support_profile, support_select
 
 __all__ = ["UNCERTAINTY_METHODS", "kappa_to_uncertainty", "normals_with_uncertainty",
-           "uncertainty_to_kappa"]
+           "uncertainty_to_covariance", "uncertainty_to_kappa"]
 
 #: Mean of a Rayleigh distribution per unit of its per-axis standard deviation.
 RAYLEIGH_MEAN = math.sqrt(math.pi / 2.0)
@@ -478,3 +478,41 @@ def kappa_to_uncertainty(kappa: Any) -> np.ndarray:
     if np.any(k <= 0):
         raise ValueError("kappa must be > 0")
     return np.degrees(np.sqrt(math.pi / (2.0 * k)))
+
+
+def uncertainty_to_covariance(normals: Any, err_deg: Any) -> np.ndarray:
+    """The per-pixel 3x3 covariance (radians^2) of the unit normal in its tangent plane.
+
+    The error model of :mod:`depthnormals.ddm.uncertainty` is isotropic in the tangent plane
+    (the same as the AngMF of :func:`uncertainty_to_kappa`): per axis a standard deviation
+    ``s = e / sqrt(pi / 2)`` (``e`` the mean angular error in radians, Rayleigh), so
+    ``Sigma = s^2 (I - n n^T)`` (rank 2, ``Sigma n = 0``; ``s^2 = 1 / kappa``, so the trace is
+    ``2 / kappa``).
+
+    Parameters
+    ----------
+    normals : array_like, shape (..., 3)
+        Unit normals (NaN: no estimate).
+    err_deg : array_like, shape (...)
+        Expected angular error in degrees (``return_uncertainty=True``).
+
+    Returns
+    -------
+    covariance : ndarray, shape (..., 3, 3), float32
+        NaN where the normal or the error is NaN.
+
+    Examples
+    --------
+    >>> import numpy as np, depthnormals as dn
+    >>> c = dn.uncertainty_to_covariance(np.array([0.0, 0.0, -1.0]), 1.0)
+    >>> bool(np.allclose(np.diag(c), [np.radians(1.0) ** 2 * 2 / np.pi] * 2 + [0.0]))
+    True
+    """
+    n = np.asarray(normals, dtype=np.float64)
+    e = np.radians(np.asarray(err_deg, dtype=np.float64))
+    if n.shape[-1:] != (3,) or n.shape[:-1] != e.shape:
+        raise ValueError(f"normals must have shape (..., 3) and err_deg the shape (...) before it; "
+                         f"got {n.shape} and {e.shape}")
+    s2 = e * e / (math.pi / 2.0)
+    cov = np.eye(3) - n[..., :, None] * n[..., None, :]
+    return (s2[..., None, None] * cov).astype(np.float32)
