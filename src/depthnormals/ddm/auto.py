@@ -45,7 +45,7 @@ from ..kernels.orient import store_nan, store_normal
 from .boxfit import box_fit_from_prepared
 from .noise import TILE, NoiseSamples, noise_pass, noise_tiles
 from .planes import planes_from_prepared
-from .support import support_profile, support_select
+from .support import SupportProfile, support_profile, support_select
 
 __all__ = [
     "AUTO_CONSISTENCY",
@@ -61,6 +61,7 @@ __all__ = [
     "auto_fused",
     "box_radius",
     "box_select",
+    "needs_measured_support",
     "noise_profile",
     "noisy_select",
     "plane_select",
@@ -195,6 +196,15 @@ def box_select(z: np.ndarray, base: np.ndarray | None, fx: float, fy: float, cx:
     return out
 
 
+def needs_measured_support(noise: NoiseSamples, prof: SupportProfile) -> bool:
+    """Which noisy branch: True (the measured support) where the depth's rounding noise
+    exceeds its second-difference level (quantised depth) or the measured fit errors exceed
+    what its level predicts for independent noise by more than :data:`EXCESS`
+    (:meth:`SupportProfile.excess`); False (the tuned box-fit) for independent noise. The one
+    rule of :func:`noisy_select`, :func:`noise_profile` and the uncertainty map."""
+    return noise.quant > noise.iid or not prof.excess() <= EXCESS  # NaN: measured
+
+
 def noisy_select(z: np.ndarray, base: np.ndarray | None, fx: float, fy: float, cx: float,
                  cy: float, noise: NoiseSamples, *, keep_chi2: float | None = None) -> np.ndarray:
     """The noisy branch on prepared depth ``z``, ``noise`` its noise pass. Where the noise is
@@ -209,7 +219,7 @@ def noisy_select(z: np.ndarray, base: np.ndarray | None, fx: float, fy: float, c
     the slope is ``(e / sqrt(pi / 2) / fx)^2``, ``e`` the measured mean angular error)."""
     sigma = noise.sigma
     prof = support_profile(z, fx, fy, cx, cy, sigma)
-    if not noise.quant > noise.iid and prof.excess() <= EXCESS:
+    if not needs_measured_support(noise, prof):
         return box_select(z, base, fx, fy, cx, cy, sigma, keep_chi2=keep_chi2,
                           levels=noise.tiles())
     out = support_select(z, fx, fy, cx, cy, sigma, profile=prof)
@@ -390,10 +400,8 @@ def noise_profile(depth: Any, K: Any, *, depth_scale: float | None = None) -> No
     prof = support_profile(z, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma)
     if not p.sigma >= PLANES_NOISE:
         branch = "planes"
-    elif not p.quant > p.iid and prof.excess() <= EXCESS:
-        branch = "box-fit"
     else:
-        branch = "measured-support"
+        branch = "measured-support" if needs_measured_support(p, prof) else "box-fit"
     return NoiseProfile(
         sigma=p.sigma, iid=p.iid, quantisation=p.quant, quant_step=p.quant_step,
         quant_share=p.quant_share, radii=prof.radii,

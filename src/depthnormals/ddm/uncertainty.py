@@ -46,11 +46,11 @@ from .._parallel import run_rows
 from ..kernels.depth import prepare
 from .auto import (
     BIG_RADIUS,
-    EXCESS,
     GATE,
     NOISE_CLEAN,
     _branch,
     box_radius,
+    needs_measured_support,
     plane_select,
 )
 from .boxfit import box_fit_from_prepared, box_fit_windows
@@ -424,7 +424,7 @@ def _plus(depth, K, depth_scale, options):
         return _clean_branch(z, c, sigma)
     sigma = p.sigma
     prof = support_profile(z, *c, sigma)
-    if not p.quant > p.iid and prof.excess() <= EXCESS:
+    if not needs_measured_support(p, prof):
         return _box_branch(z, c, sigma, p.tiles())
     return _support_branch(z, c, sigma, prof)
 
