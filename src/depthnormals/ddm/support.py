@@ -270,6 +270,15 @@ def support_profile(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
                           tuple(meas), tuple(pred))
 
 
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _gate_growth(zq, izref, half):
+    """``(z / zref)^(half / 2)`` in float32 (``izref = 1 / zref``, ``half`` 1..4), without a
+    transcendental function: how the gates grow with depth."""
+    t = np.float32(zq) * izref
+    q = np.sqrt(t)
+    return t * t if half == 4 else (t * q if half == 3 else (t if half == 2 else q))
+
+
 @nb.njit(cache=True, error_model="numpy")
 def choose_pixel(z, fits, big, shift, gates, cam, v, u):
     """The readable reference of :func:`_choose_least_rows` at one pixel (same arguments):
@@ -283,11 +292,7 @@ def choose_pixel(z, fits, big, shift, gates, cam, v, u):
     zq = z[v, u]
     if not (zq == zq):
         return nan, nan, nan
-    fac = np.float32(1.0)
-    if half > 0:
-        t = np.float32(zq) * np.float32(1.0 / zref)
-        q = np.sqrt(t)
-        fac = t * t if half == 4 else (t * q if half == 3 else (t if half == 2 else q))
+    fac = _gate_growth(zq, np.float32(1.0 / zref), half) if half > 0 else np.float32(1.0)
     best = score[v, u]
     if best <= np.float32(gate0) * fac:
         best = np.float32(-1.0)
@@ -360,30 +365,26 @@ def _choose_least_rows(v0, v1, z, fits, big, shift, gates, cam, out):
     for v in range(v0, v1):
         srow = score[v]
         zrow = z[v]
-        if half > 0:  # (z / zref)^(half / 2), without a transcendental function
+        if half > 0:
             for u in range(w):
-                t = np.float32(zrow[u]) * izref
-                q = np.sqrt(t)
-                f = t * t if half == 4 else (t * q if half == 3 else (t if half == 2 else q))
-                fac[u] = f
+                fac[u] = _gate_growth(zrow[u], izref, half)
         for u in range(w):
             x = srow[u]
             best[u] = np.float32(-1.0) if x <= g0 * fac[u] else x
             kk[u] = 0
         for k in range(1, SHIFTS.shape[0]):
-            r = v + shift * SHIFTS[k, 0]
+            r = v + dvk[k]
             if r < 0 or r >= h:
                 continue
-            du = shift * SHIFTS[k, 1]
+            du = duk[k]
             lo = max(0, -du)
             hi = min(w, w - du)
             _least(score[r, lo + du:hi + du], best[lo:hi], kk[lo:hi], np.int32(k))
         vb = min(v >> 1, big_s.shape[0] - 1)
-        for u in range(w):  # the chosen window's normal (a gather)
+        for u in range(w):  # the chosen window's normal (a gather; k > 0 only inside)
             k = kk[u]
             r = v + dvk[k]
-            c = min(max(u + duk[k], 0), w - 1)
-            r = min(max(r, 0), h - 1)
+            c = u + duk[k]
             gx[u] = fit_n[0, r, c]
             gy[u] = fit_n[1, r, c]
             gz[u] = fit_n[2, r, c]
