@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -31,6 +30,9 @@ import depthnormals as dn
 from depthnormals.camera import backproject
 from depthnormals.datasets import open as open_dataset
 from depthnormals.evaluate import plane_reference, score_planes, sensor_threshold
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from targets import fals_apply, measure_all
 
 ROOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "real-sensors"
 
@@ -104,22 +106,6 @@ def _facing(normals: np.ndarray, depth: np.ndarray, K: np.ndarray) -> np.ndarray
     return n
 
 
-def _measure(fns: list[Callable], repeats: int) -> list[tuple[float, float]]:
-    """(median thread-CPU ms, median wall ms) per callable, interleaved round-robin."""
-    for fn in fns:
-        fn()
-    cpu: list[list[float]] = [[] for _ in fns]
-    wall: list[list[float]] = [[] for _ in fns]
-    for _ in range(repeats):
-        for j, fn in enumerate(fns):
-            t0, c0 = time.perf_counter(), time.thread_time()
-            fn()
-            cpu[j].append(time.thread_time() - c0)
-            wall[j].append(time.perf_counter() - t0)
-    return [(1e3 * float(np.median(c)), 1e3 * float(np.median(t)))
-            for c, t in zip(cpu, wall, strict=True)]
-
-
 def accuracy(root: Path, labels: list[str], seed: int) -> dict:
     """folder -> label -> mean over the folder's frames of interior / rim / coverage."""
     per: dict[str, dict[str, list[dict]]] = {}
@@ -154,12 +140,9 @@ def speed(root: Path, repeats: int) -> list[dict]:
         depth = frame.depth.astype(np.float32)
         K = frame.K
         h, w = depth.shape
-        fals = cv2.rgbd.RgbdNormals_create(h, w, cv2.CV_32F, np.asarray(K, np.float64), 7,
-                                           cv2.rgbd.RgbdNormals_RGBD_NORMALS_METHOD_FALS)
-        points = cv2.rgbd.depthTo3d(depth, K)
-        (ours_cpu, ours_wall), (cv_cpu, cv_wall) = _measure(
+        (ours_cpu, ours_wall, _), (cv_cpu, cv_wall, _) = measure_all(
             [lambda d=depth, k=K: dn.estimate_normals(d, k, method="3f2n+"),
-             lambda f=fals, p=points: f.apply(p)], repeats)
+             fals_apply(depth, K, 7)], repeats)
         rows.append({"group": frame.group, "frame": frame.name, "size": f"{w}x{h}",
                      "3f2n+_cpu_ms": ours_cpu, "3f2n+_wall_ms": ours_wall,
                      "opencv-fals-7_cpu_ms": cv_cpu, "opencv-fals-7_wall_ms": cv_wall,

@@ -24,7 +24,7 @@ from depthnormals.analytic import make_scene
 from depthnormals.commands.bench import machine
 
 
-def _measure_all(fns, repeats):
+def measure_all(fns, repeats):
     """Thread CPU and wall time of every case, interleaved round-robin (load on the shared
     machine hits every case alike, so the ratios hold even when the absolute times move):
     (median CPU ms, median wall ms, min wall ms) per case."""
@@ -43,7 +43,7 @@ def _measure_all(fns, repeats):
             for c, t in zip(cpu, wall, strict=True)]
 
 
-def _fals(depth, K, window):
+def fals_apply(depth, K, window):
     """OpenCV FALS on ``depth``: a callable that runs ``apply`` only (points precomputed)."""
     import cv2
 
@@ -68,8 +68,8 @@ def real_frames(root: Path, repeats: int) -> None:
         rows.append((f"clean render {scene}", r.depth.astype(np.float32), r.K, 2.0))
     worst = {3.0: 0.0, 2.0: 0.0}
     for label, depth, K, target in rows:
-        res = _measure_all([lambda d=depth, k=K: dn.estimate_normals(d, k), _fals(depth, K, 5),
-                            _fals(depth, K, 7)], repeats)
+        res = measure_all([lambda d=depth, k=K: dn.estimate_normals(d, k), fals_apply(depth, K, 5),
+                            fals_apply(depth, K, 7)], repeats)
         ours, f5, f7 = (r[0] for r in res)
         worst[target] = max(worst[target], ours / f7)
         print(f"{label[:43]:<44}{ours:8.2f}{f5:8.2f}{f7:8.2f}{ours / f5:9.2f}{ours / f7:9.2f}")
@@ -95,9 +95,6 @@ def main() -> None:
     r = make_scene(args.scene).render()
     depth = r.depth.astype(np.float32)
     K = r.K.matrix
-    fals = cv2.rgbd.RgbdNormals_create(480, 640, cv2.CV_32F, K, 5,
-                                       cv2.rgbd.RgbdNormals_RGBD_NORMALS_METHOD_FALS)
-    points = cv2.rgbd.depthTo3d(depth, K)
     print(f"machine: {machine()}; 640x480 {args.scene}, 1 thread, median of {args.repeats}, "
           "cases interleaved")
     cases = [("3f2n", {}), ("d2nt", {"variant": "basic"}), ("d2nt", {}), ("3f2n+", {}),
@@ -107,10 +104,10 @@ def main() -> None:
              ("sda-sne", {}),
              ("plane-svd", {}), ("plane-pca", {}), ("vector-svd", {}), ("area-weighted", {}),
              ("angle-weighted", {})]
-    fns = [lambda: fals.apply(points)]
+    fns = [fals_apply(depth, K, 5)]
     fns += [lambda m=method, o=opts: dn.estimate_normals(depth, K, method=m, **o)
             for method, opts in cases]
-    res = _measure_all(fns, args.repeats)
+    res = measure_all(fns, args.repeats)
     ref = res[0]
     print(f"{'case':<34}{'CPU ms':>9}{'x FALS':>8}{'wall ms':>9}{'min ms':>9}")
     print(f"{'opencv FALS w=5 (apply only)':<34}{ref[0]:9.2f}{1.0:8.2f}{ref[1]:9.2f}{ref[2]:9.2f}")
