@@ -1,5 +1,5 @@
-"""Small shared fixtures: the shared data folder, the 3F2N torus-knot frame and a rough
-analytic scene for the fast-path equivalence tests."""
+"""Small shared fixtures: the shared data folder, the 3F2N torus-knot frame, a rough
+analytic scene for the fast-path equivalence tests, and a loader of the benchmark scripts."""
 
 from __future__ import annotations
 
@@ -8,6 +8,27 @@ from pathlib import Path
 import pytest
 
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+@pytest.fixture(scope="session")
+def load_benchmark():
+    """``load(name)``: the script ``benchmarks/<name>.py`` as a module (``<name>_bench``),
+    loaded once per session (the scripts are not a package; those with helpers beside them
+    put their folder on ``sys.path`` themselves)."""
+    import importlib.util
+
+    loaded: dict = {}
+
+    def load(name: str):
+        if name not in loaded:
+            spec = importlib.util.spec_from_file_location(f"{name}_bench", BENCHMARKS / f"{name}.py")
+            mod = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(mod)
+            loaded[name] = mod
+        return loaded[name]
+
+    return load
 
 
 @pytest.fixture(scope="session")

@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 import hashlib
-import importlib.util
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,8 +19,6 @@ from depthnormals.synth.freespace import (
     segmentation_scores,
 )
 from depthnormals.synth.scenes import PART_NAMES, Scene, make_scene, scene_names
-
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "freespace.py"
 
 
 def _world_points(depth: np.ndarray, K, pose: np.ndarray) -> np.ndarray:
@@ -159,12 +155,9 @@ def test_freespace_module_does_not_import_torch():
 # ---------------------------------------------------------------- the benchmark's training loop
 
 @pytest.fixture(scope="module")
-def bench():
+def bench(load_benchmark):
     pytest.importorskip("torch")
-    spec = importlib.util.spec_from_file_location("freespace_bench", BENCH)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_benchmark("freespace")
 
 
 def test_one_training_step_moves_the_weights(bench):

@@ -2,10 +2,7 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,19 +11,11 @@ pytest.importorskip("torch")
 pytest.importorskip("pybullet_data", reason="the object meshes ship in pybullet (the assets extra)")
 pytest.importorskip("trimesh")
 
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
 
 
 @pytest.fixture(scope="module")
-def bench():
-    sys.path.insert(0, str(BENCH))
-    try:
-        spec = importlib.util.spec_from_file_location("pose6d_bench", BENCH / "pose6d.py")
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-        yield mod
-    finally:
-        sys.path.remove(str(BENCH))
+def bench(load_benchmark):
+    return load_benchmark("pose6d")
 
 
 def test_views_are_consistent_and_cached(bench, tmp_path):
