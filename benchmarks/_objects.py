@@ -330,3 +330,33 @@ def sd(a: Any) -> float:
     """Sample standard deviation (nan for one value)."""
     a = np.asarray(a, dtype=np.float64)
     return float(np.std(a, ddof=1)) if a.size > 1 else float("nan")
+
+
+def write_report(out: Path, table: str, args: Any, K: dn.Intrinsics, *, wall: float,
+                 errors: Any, **extra: Any) -> None:
+    """The benchmark's table (markdown, ``out``) and its JSON sidecar (``out`` with
+    ``.json``), both written atomically: the settings, the object set, the camera, the
+    versions, the wall time, the normals' error on the objects, then ``extra`` (the
+    benchmark's own sizes, p-values and per-seed results)."""
+    import platform
+
+    import torch
+
+    from depthnormals.io import write_bytes_atomic
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_bytes_atomic(out, (table + "\n").encode())
+    meta = {
+        "settings": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()},
+        "objects": list(OBJECTS),
+        "object_size_m": OBJECT_SIZE,
+        "sensors": list(SENSORS),
+        "K": [K.fx, K.fy, K.cx, K.cy],
+        "depthnormals": dn.__version__,
+        "torch": torch.__version__,
+        "machine": platform.machine(),
+        "wall_s": round(wall, 1),
+        "normal_error_on_object_deg": errors,
+        **extra,
+    }
+    write_bytes_atomic(out.with_suffix(".json"), (json.dumps(meta, indent=1) + "\n").encode())

@@ -45,8 +45,6 @@ renderer's exact depth (no sensor model), to tell the normals' value from the no
 from __future__ import annotations
 
 import argparse
-import json
-import platform
 import sys
 import time
 from pathlib import Path
@@ -55,7 +53,7 @@ from typing import Any
 import numpy as np
 
 import depthnormals as dn
-from depthnormals.io import atomic_write, write_bytes_atomic
+from depthnormals.io import atomic_write
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _objects as objs
@@ -450,24 +448,9 @@ def main(argv: list[str] | None = None) -> int:
     print(table)
     print(f"wall time {wall:.0f} s")
     if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        write_bytes_atomic(args.out, (table + "\n").encode())
-        meta = {
-            "settings": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()},
-            "objects": list(objs.OBJECTS),
-            "object_size_m": objs.OBJECT_SIZE,
-            "sensors": list(objs.SENSORS),
-            "diameters_mm": [round(1000 * d, 1) for d in diameters],
-            "K": [K.fx, K.fy, K.cx, K.cy],
-            "depthnormals": dn.__version__,
-            "torch": torch.__version__,
-            "machine": platform.machine(),
-            "wall_s": round(wall, 1),
-            "normal_error_on_object_deg": errors,
-            "p_add_acc_vs_depth": pvals,
-            "results": results,
-        }
-        write_bytes_atomic(args.out.with_suffix(".json"), (json.dumps(meta, indent=1) + "\n").encode())
+        objs.write_report(args.out, table, args, K, wall=wall, errors=errors,
+                          diameters_mm=[round(1000 * d, 1) for d in diameters],
+                          p_add_acc_vs_depth=pvals, results=results)
     if args.figure and preds:
         args.figure.parent.mkdir(parents=True, exist_ok=True)
         picks = [int(np.flatnonzero(te["obj"] == o)[0]) for o in range(min(4, len(objs.OBJECTS)))]
