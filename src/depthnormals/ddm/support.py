@@ -317,6 +317,17 @@ def choose_pixel(z, fits, big, shift, gates, cam, v, u):
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
+def _put_facing(out, v, u, x, y, t, ray, ok):
+    """``out[v, u] = (x, y, t)`` turned toward the pixel's ray ``(ray_x, ray_y, 1)``, or NaN
+    where not ``ok``."""
+    nan = np.float32(np.nan)
+    sg = np.float32(-1.0) if x * ray[0] + y * ray[1] + t > 0.0 else np.float32(1.0)
+    out[v, u, 0] = x * sg if ok else nan
+    out[v, u, 1] = y * sg if ok else nan
+    out[v, u, 2] = t * sg if ok else nan
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def _least(a, out_best, out_k, k):
     """``out_best = min(out_best, a)`` elementwise, ``out_k = k`` where ``a`` is smaller
     (slices from 0, so the loop vectorises: an index ``u + du`` with a negative ``du`` kept
@@ -361,7 +372,6 @@ def _choose_least_rows(v0, v1, z, fits, big, shift, gates, cam, out):
     dvk = shift * SHIFTS[:, 0]
     duk = shift * SHIFTS[:, 1]
     rx = ((np.arange(w) - cx) / fx).astype(np.float32)
-    nan = np.float32(np.nan)
     for v in range(v0, v1):
         srow = score[v]
         zrow = z[v]
@@ -397,14 +407,8 @@ def _choose_least_rows(v0, v1, z, fits, big, shift, gates, cam, out):
                 gz[u] = big_n[2, vb, u >> 1] if take else gz[u]
         ry = np.float32((v - cy) / fy)
         for u in range(w):  # facing the pixel's ray; NaN at invalid depth or without a fit
-            ok = (zrow[u] == zrow[u]) & (best[u] < np.inf)
-            x = gx[u]
-            y = gy[u]
-            t = gz[u]
-            sg = np.float32(-1.0) if x * rx[u] + y * ry + t > 0.0 else np.float32(1.0)
-            out[v, u, 0] = x * sg if ok else nan
-            out[v, u, 1] = y * sg if ok else nan
-            out[v, u, 2] = t * sg if ok else nan
+            _put_facing(out, v, u, gx[u], gy[u], gz[u], (rx[u], ry),
+                        (zrow[u] == zrow[u]) & (best[u] < np.inf))
 
 
 def choice_inputs(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
@@ -439,21 +443,14 @@ def _upsample_rows(v0, v1, z, half, cam, out):
     depth is invalid or ``half`` has none."""
     fx, fy, cx, cy = cam
     w = z.shape[1]
-    nan = np.float32(np.nan)
     rx = ((np.arange(w) - cx) / fx).astype(np.float32)
     for v in range(v0, v1):
         hr = half[v >> 1]
         zrow = z[v]
         ry = np.float32((v - cy) / fy)
         for u in range(w):
-            x = hr[u >> 1, 0]
-            y = hr[u >> 1, 1]
-            t = hr[u >> 1, 2]
-            ok = zrow[u] == zrow[u]
-            sg = np.float32(-1.0) if x * rx[u] + y * ry + t > 0.0 else np.float32(1.0)
-            out[v, u, 0] = x * sg if ok else nan
-            out[v, u, 1] = y * sg if ok else nan
-            out[v, u, 2] = t * sg if ok else nan
+            _put_facing(out, v, u, hr[u >> 1, 0], hr[u >> 1, 1], hr[u >> 1, 2], (rx[u], ry),
+                        zrow[u] == zrow[u])
 
 
 def support_select(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
