@@ -72,20 +72,26 @@ def cpu_cases(z: np.ndarray, K: np.ndarray, compile_: bool) -> dict:
     return cases
 
 
+def _interleaved(cases: dict, repeats: int, *, warmups: int) -> dict[str, list[float]]:
+    """Wall seconds of every case, ``warmups`` calls each first, then ``repeats`` rounds
+    interleaved (load on the shared machine hits every case alike)."""
+    for f in cases.values():
+        for _ in range(warmups):
+            f()
+    times: dict[str, list[float]] = {k: [] for k in cases}
+    for _ in range(repeats):
+        for name, f in cases.items():
+            t0 = time.perf_counter()
+            f()
+            times[name].append(time.perf_counter() - t0)
+    return times
+
+
 def run_cpu(z: np.ndarray, K: np.ndarray, repeats: int, compile_: bool) -> None:
     torch.set_num_threads(1)
     dn.set_num_threads(1)
     with torch.no_grad():
-        cases = cpu_cases(z, K, compile_)
-        for f in cases.values():
-            f()
-            f()
-        times: dict[str, list[float]] = {k: [] for k in cases}
-        for _ in range(repeats):
-            for name, f in cases.items():
-                t0 = time.perf_counter()
-                f()
-                times[name].append(time.perf_counter() - t0)
+        times = _interleaved(cpu_cases(z, K, compile_), repeats, warmups=2)
     ref = statistics.median(times["kornia depth_to_normals"])
     h, w = z.shape
     print(f"\nCPU, one thread, {w}x{h}, {repeats} interleaved repeats, gradients off")
@@ -123,14 +129,7 @@ def run_cpu_batch(z: np.ndarray, K: np.ndarray, batch: int, repeats: int, compil
             fc(zt)
             compile_s = time.perf_counter() - t0
             cases["torch 3f2n+ (torch.compile)"] = lambda: fc(zt)
-        for f in cases.values():
-            f()
-        times: dict[str, list[float]] = {k: [] for k in cases}
-        for _ in range(repeats):
-            for name, f in cases.items():
-                t0 = time.perf_counter()
-                f()
-                times[name].append(time.perf_counter() - t0)
+        times = _interleaved(cases, repeats, warmups=1)
     ref = statistics.median(times["kornia depth_to_normals"])
     h, w = z.shape
     rows = []
