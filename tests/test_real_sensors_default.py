@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 import depthnormals as dn
-from depthnormals.camera import as_intrinsics, backproject
 from depthnormals.ddm.auto import PLANES_NOISE
 from depthnormals.evaluate import plane_reference, score_planes, sensor_threshold
 
@@ -26,35 +25,15 @@ def frames(shared_data):
     return out
 
 
-def _facing(n, depth, K):
-    """Peers' normals turned to face the camera (their sign is arbitrary), zero -> NaN."""
-    n = np.asarray(n, dtype=np.float64).copy()
-    n[~(np.abs(n).sum(-1) > 0)] = np.nan
-    X = backproject(depth, K)
-    flip = np.einsum("hwc,hwc->hw", n, X) > 0
-    n[flip] *= -1.0
-    return n
+#: The peers scored here, by their labels in benchmarks/real_sensors.py (its METHODS: the same
+#: calls, and its _facing turns their arbitrary signs toward the camera).
+PEERS = ("fals-11", "pcl-average-3d-gradient", "opencv-fals-7")
 
 
-def _opencv_fals(window):
-    def run(depth, K):
-        import cv2
-
-        Km = as_intrinsics(K).matrix
-        h, w = depth.shape
-        est = cv2.rgbd.RgbdNormals_create(h, w, cv2.CV_32F, np.asarray(Km, np.float64), window,
-                                          cv2.rgbd.RgbdNormals_RGBD_NORMALS_METHOD_FALS)
-        pts = cv2.rgbd.depthTo3d(np.nan_to_num(np.asarray(depth, np.float32)), np.asarray(Km, np.float64))
-        return est.apply(pts)
-
-    return run
-
-
-PEERS = {
-    "fals-11": lambda d, K: dn.estimate_normals(d, K, method="fals", window=11),
-    "pcl-average-3d-gradient": lambda d, K: dn.estimate_normals(d, K, method="pcl-average-3d-gradient"),
-    "opencv-fals-7": _opencv_fals(7),
-}
+@pytest.fixture(scope="module")
+def bench(load_benchmark):
+    pytest.importorskip("cv2")
+    return load_benchmark("real_sensors")
 
 
 def test_noise_is_never_zero_and_steady_per_sensor(frames):
@@ -67,7 +46,7 @@ def test_noise_is_never_zero_and_steady_per_sensor(frames):
 
 
 @pytest.fixture(scope="module")
-def scores(frames):
+def scores(frames, bench):
     """Interior / rim mean error per folder and method, on the first frame of each folder
     (the plane reference costs seconds a frame; benchmarks/real_sensors.py scores every frame
     with the default reference)."""
@@ -79,9 +58,9 @@ def scores(frames):
             # 64 RANSAC hypotheses a plane instead of 256: a few seconds a frame, the large
             # planes all the same (the margins below are several degrees)
             ref = plane_reference(f.depth, f.K, threshold=sensor_threshold(f.meta), hypotheses=64)
-            for label, fn in {"3f2n+": lambda d, K: dn.estimate_normals(d, K), **PEERS}.items():
-                n = fn(f.depth, f.K)
-                s = score_planes(_facing(n, f.depth, f.K), ref)
+            for label in ("3f2n+", *PEERS):
+                n = bench.METHODS[label](f.depth, f.K)
+                s = score_planes(bench._facing(n, f.depth, f.K), ref)
                 rows.setdefault(label, []).append((s["interior_mean"], s["rim_mean"]))
         table[name] = {k: np.nanmean(np.array(v), axis=0) for k, v in rows.items()}
     return table
@@ -97,7 +76,7 @@ def test_default_beats_the_peers_on_every_folder(scores, peer):
 
 def test_mean_over_folders(scores):
     ours = np.mean([row["3f2n+"] for row in scores.values()], axis=0)
-    # all frames: 4.6 / 13.4 deg (docs/benchmarks.md, real sensors); the bounds leave room for
+    # all frames: 3.83 / 10.51 deg (docs/benchmarks.md section 16); the bounds leave room for
     # the reference's RANSAC seeds, not for a regression to the old default (25.9 / 36.6)
     assert ours[0] < 6.0
     assert ours[1] < 15.0
