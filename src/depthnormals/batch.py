@@ -130,8 +130,9 @@ def map_threads(func: Callable[[T], R], items: Sequence[T], *, threads: int | No
     return results
 
 
-def estimate_normals_batch(estimate: Callable[..., np.ndarray], depth: Any, K: Any, *, method: str,
-                           depth_scale: float | None = None, **options: Any) -> np.ndarray:
+def estimate_normals_batch(estimate: Callable[..., Any], depth: Any, K: Any, *, method: str,
+                           depth_scale: float | None = None, return_uncertainty: bool = False,
+                           **options: Any) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """Normals of a stack of depth frames, frames spread over threads.
 
     Parameters
@@ -148,6 +149,9 @@ def estimate_normals_batch(estimate: Callable[..., np.ndarray], depth: Any, K: A
         A name from :func:`depthnormals.methods`.
     depth_scale : float, optional
         Metres per unit of integer depth.
+    return_uncertainty : bool, default False
+        ``estimate`` returns ``(normals, uncertainty)`` per frame (the registry then passes its
+        single-frame ``return_uncertainty=True`` path), and so does this function.
     **options
         Options of the method, as for :func:`depthnormals.estimate_normals`.
 
@@ -155,6 +159,9 @@ def estimate_normals_batch(estimate: Callable[..., np.ndarray], depth: Any, K: A
     -------
     normals : ndarray, shape (N, H, W, 3), float32
         ``normals[i]`` is bit for bit ``estimate_normals(depth[i], K_i, method=method, ...)``.
+    uncertainty : ndarray, shape (N, H, W), float32
+        Only with ``return_uncertainty=True``: ``uncertainty[i]`` is the single call's map of
+        frame i (expected angular error, degrees, NaN where the normal is NaN).
 
     Notes
     -----
@@ -170,9 +177,14 @@ def estimate_normals_batch(estimate: Callable[..., np.ndarray], depth: Any, K: A
     n, h, w = arr.shape
     cams = frame_intrinsics(K, n)
     out = np.empty((n, h, w, 3), dtype=np.float32)
+    unc = np.empty((n, h, w), dtype=np.float32) if return_uncertainty else None
 
     def one(i: int) -> None:
-        out[i] = estimate(arr[i], cams[i], method=method, depth_scale=depth_scale, **options)
+        result = estimate(arr[i], cams[i], method=method, depth_scale=depth_scale, **options)
+        if unc is None:
+            out[i] = result
+        else:
+            out[i], unc[i] = result
 
     map_threads(one, range(n))
-    return out
+    return out if unc is None else (out, unc)

@@ -203,7 +203,8 @@ def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
         Also return the expected angular error of every normal (degrees, float32 (H, W), NaN
         exactly where the normal is NaN; :mod:`depthnormals.ddm.uncertainty`): for
         ``"3f2n+"`` (default options, every branch), ``"fals"`` and PCL's four modes; any
-        other method raises ValueError. One image only (not a stack).
+        other method raises ValueError. A stack gives one map per frame, (N, H, W), each
+        equal to the frame's single call.
     **options
         Keyword options of the chosen estimator (and, for ``"<name>+"``, of
         :func:`depthnormals.ddm.discontinuity_discrimination`). Unknown names raise TypeError.
@@ -213,7 +214,7 @@ def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
     normals : ndarray, shape (H, W, 3) or (N, H, W, 3), float32
         Unit normals in the OpenCV camera frame facing the camera (``dot(n, X) < 0``),
         NaN where no estimate is possible.
-    uncertainty : ndarray, shape (H, W), float32
+    uncertainty : ndarray, shape (H, W) or (N, H, W), float32
         Only with ``return_uncertainty=True``: the expected angular error in degrees.
 
     Warns
@@ -239,33 +240,40 @@ def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
     if not isinstance(return_uncertainty, bool):
         raise TypeError(f"return_uncertainty must be True or False; got {return_uncertainty!r}")
     if return_uncertainty:
-        if ndim == 3 and _is_stack(np.shape(depth), stack):
-            raise ValueError("return_uncertainty=True takes one image (H, W); call it per frame "
-                             "of a stack")
         get_estimator(method[:-1] if method.endswith("+") else method)  # unknown names first
-        out, unc = normals_with_uncertainty(compute_normals, depth, K, method=method,
-                                            depth_scale=depth_scale, options=options)
-        if not _has_finite(out):
-            z = check_depth(depth, depth_scale=depth_scale)
-            warnings.warn(no_valid_normal_message(z), NoValidNormalWarning, stacklevel=2)
-        return out, unc
     if ndim == 3 and _is_stack(np.shape(depth), stack):
         from .batch import estimate_normals_batch
 
-        out = estimate_normals_batch(compute_normals, depth, K, method=method, depth_scale=depth_scale,
-                                     **options)
+        result = estimate_normals_batch(_with_uncertainty if return_uncertainty else compute_normals,
+                                        depth, K, method=method, depth_scale=depth_scale,
+                                        return_uncertainty=return_uncertainty, **options)
+        out = result[0] if return_uncertainty else result
         empty = [i for i in range(out.shape[0]) if not np.isfinite(out[i, ..., 0]).any()]
         if empty:
             shown = ", ".join(map(str, empty[:10])) + (", ..." if len(empty) > 10 else "")
             warnings.warn(f"{len(empty)} of {out.shape[0]} frames of the stack hold no finite normal "
                           f"(frames {shown}): no valid depth, or no valid pixel with a valid neighbour",
                           NoValidNormalWarning, stacklevel=2)
-        return out
+        return result
+    if return_uncertainty:
+        out, unc = _with_uncertainty(depth, K, method=method, depth_scale=depth_scale, **options)
+        if not _has_finite(out):
+            z = check_depth(depth, depth_scale=depth_scale)
+            warnings.warn(no_valid_normal_message(z), NoValidNormalWarning, stacklevel=2)
+        return out, unc
     out = compute_normals(depth, K, method=method, depth_scale=depth_scale, **options)
     if not _has_finite(out):
         z = check_depth(depth, depth_scale=depth_scale)
         warnings.warn(no_valid_normal_message(z), NoValidNormalWarning, stacklevel=2)
     return out
+
+
+def _with_uncertainty(depth: Any, K: Any, *, method: str, depth_scale: float | None = None,
+                      **options: Any) -> tuple[np.ndarray, np.ndarray]:
+    """One frame's ``(normals, uncertainty)`` (:func:`depthnormals.ddm.uncertainty.normals_with_uncertainty`
+    over :func:`compute_normals`), in the call form a batch's frames use."""
+    return normals_with_uncertainty(compute_normals, depth, K, method=method,
+                                    depth_scale=depth_scale, options=options)
 
 
 def _has_finite(out: np.ndarray) -> bool:
