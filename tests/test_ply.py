@@ -131,3 +131,69 @@ def test_crash_mid_write_leaves_no_complete_looking_file(scene, tmp_path, monkey
     with pytest.raises(OSError, match="No space"):
         write_ply(path, depth, K, normals)
     assert list(Path(tmp_path).iterdir()) == []
+
+
+def test_uncertainty_channel_reads_back(scene, tmp_path):
+    """``uncertainty=``: one more float property, the map's values at the written points; the
+    points are the same as without it (the map does not choose them)."""
+    clean, _, _, rgb = scene
+    depth = clean + np.random.default_rng(2).normal(0.0, 0.004, clean.shape).astype(np.float32)
+    n, u = dn.estimate_normals(depth, K, return_uncertainty=True)
+    ok = np.isfinite(depth) & (depth > 0) & np.all(np.isfinite(n), axis=-1)
+    assert np.array_equal(np.isnan(u), np.isnan(n[..., 0])) and ok.sum() > 0.9 * (depth > 0).sum()
+    path = tmp_path / "u.ply"
+    assert write_ply(path, depth, K, n, colors=rgb, uncertainty=u) == ok.sum()
+    v = plyfile.PlyData.read(str(path))["vertex"]
+    assert [p.name for p in v.properties] == ["x", "y", "z", "nx", "ny", "nz", "red", "green",
+                                              "blue", "uncertainty"]
+    assert v["uncertainty"].dtype == np.float32
+    assert np.array_equal(v["uncertainty"], u[ok]) and np.isfinite(v["uncertainty"]).all()
+    # degrees: 4 mm noise, box-fit planes (~0.08) and the edges of the box (> 1)
+    assert 0.02 < float(np.median(v["uncertainty"])) < 1.0
+    assert float(np.percentile(v["uncertainty"], 99)) > 1.0
+    assert np.array_equal(np.stack([v["nx"], v["ny"], v["nz"]], -1), n[ok])
+    # a NaN in the map where the normal is valid is written as NaN, the point is kept
+    u2 = u.copy()
+    u2[50, 60] = np.nan
+    assert ok[50, 60]
+    assert write_ply(tmp_path / "u2.ply", depth, K, n, uncertainty=u2) == ok.sum()
+    w = plyfile.PlyData.read(str(tmp_path / "u2.ply"))["vertex"]
+    assert [p.name for p in w.properties][-1] == "uncertainty"
+    assert np.isnan(w["uncertainty"]).sum() == 1
+    with pytest.raises(ValueError, match="uncertainty must have shape"):
+        write_ply(tmp_path / "bad.ply", depth, K, n, uncertainty=u[:-1])
+    with pytest.raises(TypeError, match="uncertainty must be a real"):
+        write_ply(tmp_path / "bad.ply", depth, K, n, uncertainty=u > 1)
+    assert not (tmp_path / "bad.ply").exists()
+
+
+@pytest.mark.parametrize("many", [False, True])
+def test_cli_ply_carries_uncertainty(tmp_path, many):
+    """``depthnormals estimate ... -o x.ply --uncertainty``: the PLY's uncertainty channel is
+    the .npy map beside it at the written points (one file and a folder run)."""
+    import json
+
+    from depthnormals.cli import main
+
+    r = box_on_floor().render(K, (96, 128))
+    depth = r.depth.astype(np.float32)
+    (tmp_path / "in").mkdir()
+    np.save(tmp_path / "in" / "a.npy", depth)
+    (tmp_path / "k.json").write_text(json.dumps({"fx": K.fx, "fy": K.fy, "cx": K.cx, "cy": K.cy}))
+    if many:
+        args = [str(tmp_path / "in"), "-o", str(tmp_path / "out"), "--format", "ply", "-q"]
+    else:
+        args = [str(tmp_path / "in" / "a.npy"), "-o", str(tmp_path / "out" / "a.ply")]
+    assert main(["estimate", *args, "-K", str(tmp_path / "k.json"), "--uncertainty"]) == 0
+    [ply] = list((tmp_path / "out").rglob("a.ply"))
+    u = np.load(ply.with_name("a.uncertainty.npy"))
+    n, want = dn.estimate_normals(depth, K, return_uncertainty=True)
+    np.testing.assert_array_equal(u, want)
+    v = plyfile.PlyData.read(str(ply))["vertex"]
+    ok = np.all(np.isfinite(n), axis=-1)
+    assert np.array_equal(v["uncertainty"], u[ok]) and len(v["uncertainty"]) == ok.sum()
+    # without the flag: no channel
+    assert main(["estimate", str(tmp_path / "in" / "a.npy"), "-K", str(tmp_path / "k.json"),
+                 "-o", str(tmp_path / "plain.ply")]) == 0
+    names = [p.name for p in plyfile.PlyData.read(str(tmp_path / "plain.ply"))["vertex"].properties]
+    assert names == ["x", "y", "z", "nx", "ny", "nz"]

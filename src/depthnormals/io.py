@@ -603,10 +603,13 @@ def read_normals(path: str | Path) -> np.ndarray:
 
 _PLY_FIELDS = (("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4"))
 _PLY_COLOURS = (("red", "u1"), ("green", "u1"), ("blue", "u1"))
+_PLY_UNCERTAINTY = (("uncertainty", "<f4"),)
 
 
-def _cloud(depth: Any, K: Any, normals: Any, colors: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """Points (float64), normals and colours of the valid pixels (finite depth > 0 and finite normal)."""
+def _cloud(depth: Any, K: Any, normals: Any, colors: Any, uncertainty: Any = None
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """Points (float64), normals, colours and uncertainty of the valid pixels (finite depth > 0
+    and finite normal; the uncertainty does not choose them)."""
     from .camera import backproject
 
     z = check_depth(depth)
@@ -621,10 +624,20 @@ def _cloud(depth: Any, K: Any, normals: Any, colors: Any) -> tuple[np.ndarray, n
         if rgb.shape != (*z.shape, 3):
             raise ValueError(f"colors must have shape {(*z.shape, 3)} like depth; got {rgb.shape}")
         rgb = rgb[valid]
-    return points[valid], np.asarray(n[valid]), rgb
+    unc = None
+    if uncertainty is not None:
+        unc = np.asarray(uncertainty)
+        if unc.dtype == bool or unc.dtype.kind not in "iuf":
+            raise TypeError(f"uncertainty must be a real (H, W) array (degrees, from "
+                            f"estimate_normals(..., return_uncertainty=True)); got dtype {unc.dtype}")
+        if unc.shape != z.shape:
+            raise ValueError(f"uncertainty must have shape {z.shape} like depth; got {unc.shape}")
+        unc = unc[valid]
+    return points[valid], np.asarray(n[valid]), rgb, unc
 
 
-def write_ply(path: str | Path, depth: Any, K: Any, normals: Any, *, colors: Any = None) -> int:
+def write_ply(path: str | Path, depth: Any, K: Any, normals: Any, *, colors: Any = None,
+              uncertainty: Any = None) -> int:
     """Write the valid pixels as a binary little-endian PLY point cloud, atomically.
 
     Parameters
@@ -640,6 +653,12 @@ def write_ply(path: str | Path, depth: Any, K: Any, normals: Any, *, colors: Any
         pixels with a NaN normal are skipped.
     colors : array (H, W, 3) uint8, optional
         Per-pixel RGB, written as ``uchar red green blue``.
+    uncertainty : array (H, W), optional
+        The expected angular error of each normal in degrees
+        (``estimate_normals(..., return_uncertainty=True)``), written as ``float uncertainty``.
+        It does not choose the points: a point is written where depth and normal are valid,
+        with its value as given (the library's map is NaN exactly where the normal is NaN, so
+        every written value is finite).
 
     Returns
     -------
@@ -650,7 +669,8 @@ def write_ply(path: str | Path, depth: Any, K: Any, normals: Any, *, colors: Any
     -----
     One ``vertex`` element with ``float x y z nx ny nz`` (float32: the points of
     :func:`depthnormals.backproject` rounded to float32, the normals as given rounded to
-    float32), then ``uchar red green blue`` when ``colors`` is given, in row-major pixel order.
+    float32), then ``uchar red green blue`` when ``colors`` is given, then
+    ``float uncertainty`` when ``uncertainty`` is given, in row-major pixel order.
     Camera frame: OpenCV (x right, y down, z forward), metres. Open3D, plyfile and MeshLab read it.
 
     Examples
@@ -663,8 +683,9 @@ def write_ply(path: str | Path, depth: Any, K: Any, normals: Any, *, colors: Any
     ...     write_ply(os.path.join(tmp, "wall.ply"), depth, (100, 100, 2, 1.5), n)
     20
     """
-    points, n, rgb = _cloud(depth, K, normals, colors)
-    fields = _PLY_FIELDS + (_PLY_COLOURS if rgb is not None else ())
+    points, n, rgb, unc = _cloud(depth, K, normals, colors, uncertainty)
+    fields = (_PLY_FIELDS + (_PLY_COLOURS if rgb is not None else ())
+              + (_PLY_UNCERTAINTY if unc is not None else ()))
     records = np.empty(len(points), dtype=list(fields))
     for i, axis in enumerate("xyz"):
         records[axis] = points[:, i]
@@ -672,6 +693,8 @@ def write_ply(path: str | Path, depth: Any, K: Any, normals: Any, *, colors: Any
     if rgb is not None:
         for i, name in enumerate(("red", "green", "blue")):
             records[name] = rgb[:, i]
+    if unc is not None:
+        records["uncertainty"] = unc
     types = {"<f4": "float", "u1": "uchar"}
     header = "".join([
         "ply\n", "format binary_little_endian 1.0\n",
@@ -712,7 +735,7 @@ def to_open3d(depth: Any, K: Any, normals: Any, *, colors: Any = None) -> Any:
     except ImportError as exc:
         raise ImportError("to_open3d needs Open3D: pip install 'depthnormals[open3d]' "
                           "(or the open3d / open3d-cpu wheel)") from exc
-    points, n, rgb = _cloud(depth, K, normals, colors)
+    points, n, rgb, _ = _cloud(depth, K, normals, colors)
     cloud = o3d.geometry.PointCloud()
     cloud.points = o3d.utility.Vector3dVector(np.ascontiguousarray(points, dtype=np.float64))
     cloud.normals = o3d.utility.Vector3dVector(np.ascontiguousarray(n, dtype=np.float64))

@@ -298,11 +298,14 @@ def normals_and_uncertainty(depth: np.ndarray, K: Any, method: str, options: Map
                                     options=dict(options))
 
 
-def _write(path: Path, normals: np.ndarray, depth: np.ndarray, K: Intrinsics, vis: str = "3f2n") -> None:
+def _write(path: Path, normals: np.ndarray, depth: np.ndarray, K: Intrinsics, vis: str = "3f2n",
+           uncertainty: np.ndarray | None = None) -> None:
+    """The normals at ``path``: a point cloud for ``.ply`` (with the expected-error map as its
+    ``uncertainty`` channel when given), else a normal map (which does not carry it)."""
     from . import io
 
     if path.name.lower().endswith(".ply"):
-        io.write_ply(path, depth, K, normals)
+        io.write_ply(path, depth, K, normals, uncertainty=uncertainty)
     else:
         io.write_normals(path, normals, vis=vis)
 
@@ -334,7 +337,7 @@ def estimate_job(job: EstimateJob, settings: EstimateSettings) -> tuple[str, int
     job.output.parent.mkdir(parents=True, exist_ok=True)
     if unc is not None:  # first: a finished output implies its map (resume checks the output)
         write_uncertainty(uncertainty_path(job.output), unc)
-    _write(job.output, normals, depth, job.K, settings.vis)
+    _write(job.output, normals, depth, job.K, settings.vis, unc)
     return str(job.output), int(np.count_nonzero(np.isfinite(normals[..., 0])))
 
 
@@ -452,7 +455,8 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
     uncertainty : bool, default False
         Also write each frame's expected angular error (degrees, float32 (H, W)) to
         ``<name>.uncertainty.npy`` beside its output (:func:`uncertainty_path`, atomically,
-        before the normals); recorded in the manifest. Only for the methods of
+        before the normals); a ``.ply`` output also carries it per point (``float
+        uncertainty``). Recorded in the manifest. Only for the methods of
         ``return_uncertainty=True``.
 
     Returns

@@ -58,7 +58,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "format); for other formats it must match the file")
     parser.add_argument("--uncertainty", action="store_true",
                         help="also write the expected angular error (deg, float32) of every normal to "
-                             "<name>.uncertainty.npy beside the output (3f2n+, fals, PCL's modes)")
+                             "<name>.uncertainty.npy beside the output (3f2n+, fals, PCL's modes); "
+                             "a .ply output also gets it as the per-point float 'uncertainty'")
     parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                         help="estimator option, e.g. --option kernel=sobel (repeatable; JSON values)")
     many = parser.add_argument_group("many inputs (output folder -o DIR)")
@@ -221,7 +222,8 @@ def estimate_file(depth_path: Path, intrinsics_path: Path, output: Path, *,
     """Read one depth file and its intrinsics, estimate the normals, write them atomically.
 
     With ``uncertainty``, the expected angular error of every normal goes to
-    ``<name>.uncertainty.npy`` beside ``output`` (:func:`depthnormals.jobs.uncertainty_path`).
+    ``<name>.uncertainty.npy`` beside ``output`` (:func:`depthnormals.jobs.uncertainty_path`),
+    and a ``.ply`` output carries it per point (``float uncertainty``, :func:`depthnormals.io.write_ply`).
 
     The normals are written even when none is finite (``valid_normals == 0`` in the report
     says so; ``valid_depth == 0`` when no depth pixel is valid). The output's folder is
@@ -254,7 +256,7 @@ def estimate_file(depth_path: Path, intrinsics_path: Path, output: Path, *,
         if unc is not None:
             write_uncertainty(uncertainty_path(output), unc)
         if output.name.lower().endswith(".ply"):  # a point cloud: valid points with their normals
-            write_ply(output, depth, K, normals)
+            write_ply(output, depth, K, normals, uncertainty=unc)
         else:
             write_normals(output, normals, vis=vis)
     except BaseException:
