@@ -47,7 +47,8 @@ from .boxfit import SHIFTS, box_fit_windows, solve_window
 
 __all__ = ["BIG_FACTOR", "EXCESS_FLOOR", "GATE", "MAX_RADIUS", "PAIR_TO_ERROR", "RADII",
            "TARGET_ERROR", "SupportProfile", "choice_inputs", "choose_pixel", "depth_exponent",
-           "predicted_error", "support_profile", "support_select"]
+           "predicted_error", "profile_from_pairs", "sample_every", "sample_step",
+           "support_profile", "support_select"]
 
 #: Candidate window radii (windows of 3x3 to 33x33 pixels).
 RADII = (1, 2, 3, 4, 6, 8, 11, 16)
@@ -235,6 +236,17 @@ def depth_exponent(res: np.ndarray, z: np.ndarray) -> tuple[float, float]:
     return zm, min(MAX_EXPONENT, max(0.0, math.log(rf / rn) / math.log(zf / zn)))
 
 
+def sample_step(h: int, w: int, r: int) -> int:
+    """Spacing of the grid of sampled windows of radius ``r`` on an ``h x w`` image: about
+    :data:`SAMPLES` windows, at least ``2 (2 r + 1)`` apart."""
+    return max(2 * (2 * r + 1), int(math.sqrt(h * w / SAMPLES)))
+
+
+def sample_every(r: int) -> int:
+    """Sampled windows of radius ``r`` are read on every this-many rows and columns."""
+    return 2 if r >= SPARSE_RADIUS else 1
+
+
 def support_profile(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
                     sigma: float, *, target: float = TARGET_ERROR) -> SupportProfile:
     """Measure the fitted normal's error per radius on prepared depth ``z`` (module doc) and
@@ -242,15 +254,30 @@ def support_profile(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
     Radii are measured smallest first and the search stops at the first that reaches
     ``target``."""
     h, w = z.shape
+
+    def pairs(r: int) -> np.ndarray:
+        step = sample_step(h, w, r)
+        out = np.empty((2 * (h // step + 1) * (w // step + 1), 3))
+        k = _pairs(z, r, float(fx), float(fy), float(cx), float(cy), step, sample_every(r), out)
+        return out[:k]
+
+    return profile_from_pairs(pairs, sigma, target=target)
+
+
+def profile_from_pairs(pairs, sigma: float, *, target: float = TARGET_ERROR) -> SupportProfile:
+    """The statistics of :func:`support_profile` from the adjacent-window pairs:
+    ``pairs(r)`` gives, for a radius of :data:`RADII`, the rows (angle between the two
+    normals in degrees, the larger residual variance, the depth at the first window's
+    centre), in any order (the torch port computes them on the device and hands them here,
+    so both take the same decisions)."""
     radii, errors, residuals, kept, meas, pred = [], [], [], [], [], []
     for r in RADII:
-        step = max(2 * (2 * r + 1), int(math.sqrt(h * w / SAMPLES)))
-        out = np.empty((2 * (h // step + 1) * (w // step + 1), 3))
-        every = 2 if r >= SPARSE_RADIUS else 1
-        k = _pairs(z, r, float(fx), float(fy), float(cx), float(cy), step, every, out)
+        every = sample_every(r)
+        out = pairs(r)
+        k = out.shape[0]
         if k < MIN_PAIRS:
             break
-        ang, res = out[:k, 0], out[:k, 1]
+        ang, res = out[:, 0], out[:, 1]
         keep = res <= float(np.median(res))
         measured = PAIR_TO_ERROR * float(np.median(ang[keep]))
         radii.append(r)
@@ -258,7 +285,7 @@ def support_profile(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
         pred.append(predicted_error(sigma, r, every))
         errors.append(max(measured, predicted_error(sigma, r)))
         residuals.append(float(np.median(res[keep])))
-        kept.append(out[:k][keep])
+        kept.append(out[keep])
         if errors[-1] <= target:
             break
     if not radii:

@@ -10,7 +10,8 @@ import torch
 from torch import nn
 
 from .._validate import check_int, check_real
-from ._common import Grid, finish, prepare
+from ._auto import noisy_frames, noisy_select
+from ._common import Camera, Grid, finish, prepare
 from ._d2nt import VARIANTS, d2nt
 from ._ddm import refine
 from ._planes import plane_select
@@ -20,6 +21,9 @@ __all__ = ["METHODS", "TORCH_MODULE_DEFAULTS", "EstimateNormals", "estimate_norm
            "normals_mask"]
 
 _BASES = ("3f2n", "d2nt", "sne-roadseg")
+#: where :func:`estimate_normals` computes: ``"auto"`` (the numba library for CPU tensors
+#: without gradients, torch otherwise), ``"torch"``, ``"numba"``
+BACKENDS = ("auto", "torch", "numba")
 #: names accepted by :func:`estimate_normals` (``"<name>+"``: the estimator, then the DDM)
 METHODS = (*_BASES, *(b + "+" for b in _BASES))
 _CURVATURES = ("mean", "max", "normal", "gauss", "pixel-mean", "none")
@@ -173,7 +177,7 @@ def _pad(base: str, o: dict[str, Any], refined: bool) -> int:
 
 def estimate_normals(depth: torch.Tensor, K: Any, *, method: str = "3f2n+",
                      depth_scale: float | None = None, invalid: str = "nan",
-                     **options: Any) -> torch.Tensor:
+                     backend: str = "auto", **options: Any) -> torch.Tensor:
     """Surface normals of a batch of depth images, in torch: batched, differentiable, on the
     device of the input.
 
@@ -234,27 +238,123 @@ def estimate_normals(depth: torch.Tensor, K: Any, *, method: str = "3f2n+",
     base = _check_method(method)
     if not isinstance(invalid, str) or invalid not in ("nan", "zero"):
         raise ValueError(f"invalid must be 'nan' or 'zero'; got {invalid!r}")
+    if not isinstance(backend, str) or backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {', '.join(BACKENDS)}; got {backend!r}")
     o = _check_options(method, options)
     z, valid, cam, out_dtype = prepare(depth, K, depth_scale)
+    if backend == "numba" or (backend == "auto" and _numba_suits(depth, K)):
+        return _numba_backend(depth, K, method, depth_scale, invalid, options, out_dtype)
+    plus = method.endswith("+")
+    if plus and o["selection"] in ("auto", "box-fit"):
+        z64 = torch.where(valid, z.to(torch.float64), float("nan"))
+        cam64 = tuple(c.to(torch.float64) for c in (cam.fx, cam.fy, cam.cx, cam.cy))
+        noise, noisy = noisy_frames(z64, cam64, o)
+        if noisy:
+            return finish(*_mixed(z, valid, cam, z64, cam64, noise, noisy, base, method, o),
+                          invalid, out_dtype)
+    return finish(*_clean(z, valid, cam, base, method, o), invalid, out_dtype)
+
+
+def _estimator(grid: Grid, cam: Camera, base: str, o: dict[str, Any]):
+    if base == "3f2n":
+        return three_filters_to_normal(grid, cam, o["kernel"], o["kernel_size"], o["aggregate"])
+    if base == "d2nt":
+        return d2nt(grid, cam, o["variant"])
+    return sne_roadseg(grid, cam)
+
+
+def _clean(z, valid, cam: Camera, base: str, method: str, o: dict[str, Any]):
+    """The estimator and, for ``"<name>+"``, the module's clean branch (or the selection
+    asked for): (nx, ny, nz, ok)."""
     grid = Grid(z, valid, _pad(base, o, method.endswith("+")))
     planes = method.endswith("+") and (o["selection"] == "planes" or (
-        o["selection"] == "auto" and not o["crf"] and o["correlation"] == "none"))
+        o["selection"] in ("auto", "box-fit") and not o["crf"] and o["correlation"] == "none"))
     if planes and base == "3f2n":  # 3F2N never abstains at valid depth: nothing of it is kept
-        return finish(*plane_select(grid, cam, valid), invalid, out_dtype)
-    if base == "3f2n":
-        n = three_filters_to_normal(grid, cam, o["kernel"], o["kernel_size"], o["aggregate"])
-    elif base == "d2nt":
-        n = d2nt(grid, cam, o["variant"])
-    else:
-        n = sne_roadseg(grid, cam)
+        return plane_select(grid, cam, valid)
+    n = _estimator(grid, cam, base, o)
     if planes:
-        n = plane_select(grid, cam, n[3])
-    elif method.endswith("+"):
-        if o["selection"] == "auto":  # with the CRF / a correlation: margin min(consistency, 0)
+        return plane_select(grid, cam, n[3])
+    if method.endswith("+"):
+        if o["selection"] in ("auto", "box-fit"):  # with the CRF / a correlation: margin min(consistency, 0)
             eps = o["consistency"]
             o = {**o, "selection": "curvature", "consistency": None if eps is None else min(eps, 0.0)}
-        n = refine(grid, cam, n[:3], n[3], o)
-    return finish(*n, invalid, out_dtype)
+        return refine(grid, cam, n[:3], n[3], o)
+    return n
+
+
+def _cam_sub(cam: Camera, idx: torch.Tensor) -> Camera:
+    return Camera(*(c if c.shape[0] == 1 else c[idx] for c in (cam.fx, cam.fy, cam.cx, cam.cy, cam.a, cam.b)))
+
+
+def _mixed(z, valid, cam: Camera, z64, cam64, noise, noisy: list[int], base: str, method: str,
+           o: dict[str, Any]):
+    """Frames ``noisy`` through the noisy branch, the others through the clean one; (nx, ny,
+    nz, ok) in the batch's order."""
+    b = z.shape[0]
+    dev = z.device
+    clean = [i for i in range(b) if i not in set(noisy)]
+    nt = torch.tensor(noisy, device=dev)
+    est = None
+    if base != "3f2n":  # the estimator's normals are kept where the fit agrees (ddm.auto._keep_rows)
+        sub = _cam_sub(cam, nt)
+        est = _estimator(Grid(z[nt], valid[nt], _pad(base, o, True)), sub, base, o)
+        est = tuple(q.to(torch.float64) if q.dtype.is_floating_point else q for q in est)
+    parts = [tuple(q.to(z.dtype) if q.dtype.is_floating_point else q
+                   for q in noisy_select(z64, valid, cam64, noise, noisy, base=est))]
+    order = list(noisy)
+    if clean:
+        ct = torch.tensor(clean, device=dev)
+        parts.append(_clean(z[ct], valid[ct], _cam_sub(cam, ct), base, method, o))
+        order += clean
+    res = tuple(torch.cat(q) for q in zip(*parts, strict=True))
+    if order != list(range(b)):
+        inv = torch.empty(b, dtype=torch.long)
+        inv[torch.tensor(order)] = torch.arange(b)
+        res = tuple(q[inv.to(dev)] for q in res)
+    return res
+
+
+def _numba_suits(depth: torch.Tensor, K: Any) -> bool:
+    """``backend="auto"``: the numba library computes where it gives the same answer faster
+    and nothing is lost: a CPU tensor, no gradient asked for (of the depth or of tensor
+    intrinsics)."""
+    if depth.device.type != "cpu":
+        return False
+    if torch.is_grad_enabled() and (depth.requires_grad or (isinstance(K, torch.Tensor) and K.requires_grad)):
+        return False
+    return not (isinstance(K, torch.Tensor) and K.device.type != "cpu")
+
+
+def _numba_backend(depth, K, method: str, depth_scale, invalid: str, options: dict[str, Any],
+                   out_dtype: torch.dtype) -> torch.Tensor:
+    """Every frame through :func:`depthnormals.estimate_normals` (same method and options, the
+    torch defaults where they differ): (B, 3, H, W) on the CPU in ``out_dtype``."""
+    import numpy as np
+
+    import depthnormals as dn
+
+    d = depth.detach()
+    if d.ndim == 4:
+        d = d[:, 0]
+    if d.dtype in (torch.float16, torch.bfloat16):
+        d = d.to(torch.float32)
+    arr = d.numpy()
+    b = arr.shape[0]
+    if isinstance(K, torch.Tensor):
+        kk = K.detach().to(torch.float64).cpu().numpy()
+        per_frame = kk.ndim == 3 or (kk.ndim == 2 and kk.shape[-1] == 4)
+        Ks = [kk[0 if kk.shape[0] == 1 else i] if per_frame else kk for i in range(b)]
+    else:
+        Ks = [K] * b
+    opts = dict(options)
+    if method.endswith("+"):
+        for name, value in TORCH_MODULE_DEFAULTS.items():
+            opts.setdefault(name, value)
+    out = np.stack([dn.estimate_normals(arr[i], Ks[i], method=method, depth_scale=depth_scale, **opts)
+                    for i in range(b)])
+    if invalid == "zero":
+        out = np.where(np.isnan(out), np.float32(0.0), out)
+    return torch.from_numpy(out).permute(0, 3, 1, 2).to(out_dtype)
 
 
 def normals_mask(normals: torch.Tensor) -> torch.Tensor:

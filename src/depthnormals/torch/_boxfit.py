@@ -1,0 +1,316 @@
+"""The noisy branches of the default 3F2N+ in torch: box-fit windows and their choices.
+
+The same rules, constants and order of decisions as :mod:`depthnormals.ddm.boxfit`,
+:func:`depthnormals.ddm.auto.box_select` (independent noise) and
+:func:`depthnormals.ddm.support.support_select` (the measured support of real sensors); read
+them for the method (ours, not the paper's).
+
+The ten window sums of every pixel are two separable convolutions in float64 (a row pass of
+the count, ``1 / z`` and ``1 / z^2`` against ``1, du, du^2``, then a column pass against
+``1, dv, dv^2``): direct sums, so their rounding is that of the numba running sums' order of
+magnitude, and nothing loops over windows. The planes are solved for every pixel at once
+(the adjugate of the 3x3 normal equations). What the numba kernels store in float32 and
+compare (residual variances, planes, gates) is rounded to float32 here before it is compared,
+so both libraries take the same decisions; the normals themselves are computed in float64
+from the float64 planes and carry gradients.
+
+Gradients: the normal of a window is a smooth function of the depths in it (a least-squares
+plane), so the output is differentiable with respect to depth wherever it is finite; the
+choice of the window (residual tests, the least score of nine, the large window's gate) is
+discrete and has no gradient: the chosen window's plane carries the gradient of its pixels.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+from ..ddm.boxfit import LOCAL_CAP, MIN_POINTS, SHIFTS
+from ._common import shift as _at
+
+__all__ = ["Fits", "box_fits", "choose_least", "choose_local", "choose_plain", "keep_estimator",
+           "upsample_half"]
+
+_SHIFTS = [tuple(int(x) for x in s) for s in SHIFTS]  # (dv, du), the centred window first
+
+
+def _f32(x: torch.Tensor) -> torch.Tensor:
+    """``x`` rounded to float32 and back (what the numba kernels store), no gradient."""
+    return x.detach().float().double()
+
+
+class Fits:
+    """Centred-window fits of radius ``r`` on (B, H, W) depth: the plane ``w = a du + b dv +
+    c`` of ``1 / z`` around every pixel (float64, with gradients), the normal
+    ``(fx a, fy b, c - a (u - cx) - b (v - cy))`` (not unit, not turned), whether the window
+    has a fit (``good``) and its residual variance in footprints^2 as the numba kernels
+    store it (float32 values in float64, inf where no fit; no gradient)."""
+
+    def __init__(self, a, b, c, good, score, cam):
+        self.a, self.b, self.c, self.good, self.score = a, b, c, good, score
+        self.cam = cam
+
+    def normal(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        fx, fy, cx, cy = self.cam
+        h, w = self.a.shape[-2:]
+        au = torch.arange(w, dtype=self.a.dtype, device=self.a.device).reshape(1, 1, w) - cx
+        bv = torch.arange(h, dtype=self.a.dtype, device=self.a.device).reshape(1, h, 1) - cy
+        return fx * self.a, fy * self.b, self.c - self.a * au - self.b * bv
+
+
+def _sums(x: torch.Tensor, m: torch.Tensor, r: int) -> list[torch.Tensor]:
+    """The ten window sums (count, du, dv, du^2, du dv, dv^2, w, du w, dv w, w^2) of every
+    pixel's ``(2 r + 1)^2`` window, float64 (B, H, W) each; ``x`` is ``1 / z`` (0 at invalid
+    pixels), ``m`` the validity as 0 / 1."""
+    k = torch.arange(-r, r + 1, dtype=x.dtype, device=x.device)
+    one = torch.ones_like(k)
+    zero = torch.zeros_like(k)
+    # row pass: channels (m, x, x^2) -> (m, du m, du^2 m, x, du x, x^2)
+    wr = torch.stack([torch.stack([one, zero, zero]), torch.stack([k, zero, zero]),
+                      torch.stack([k * k, zero, zero]), torch.stack([zero, one, zero]),
+                      torch.stack([zero, k, zero]), torch.stack([zero, zero, one])])
+    inp = torch.stack((m, x, x * x), dim=1)
+    rs = F.conv2d(inp, wr[:, :, None, :], padding=(0, r))
+    # column pass: the six plain sums, then dv m, dv (du m), dv x, dv^2 m
+    eye = torch.eye(6, dtype=x.dtype, device=x.device)
+    cols = [eye[i][:, None] * one[None, :] for i in range(6)]
+    for src, wt in ((0, k), (1, k), (3, k), (0, k * k)):
+        cols.append(eye[src][:, None] * wt[None, :])
+    wc = torch.stack(cols)  # (10, 6, 2r+1)
+    t = F.conv2d(rs, wc[:, :, :, None], padding=(r, 0))
+    n, su, suu, sw, suw, sww, sv, suv, svw, svv = t.unbind(1)
+    return [n, su, sv, suu, suv, svv, sw, suw, svw, sww]
+
+
+def _solve(n, su, sv, suu, suv, svv, sw, suw, svw, sww):
+    """:func:`depthnormals.ddm.boxfit.solve_window` elementwise: (a, b, c, rss, ok)."""
+    c00 = svv * n - sv * sv
+    c01 = su * sv - suv * n
+    c02 = suv * sv - su * svv
+    c11 = suu * n - su * su
+    c12 = suv * su - suu * sv
+    c22 = suu * svv - suv * suv
+    x = c00 * suw + c01 * svw + c02 * sw
+    y = c01 * suw + c11 * svw + c12 * sw
+    t = c02 * suw + c12 * svw + c22 * sw
+    det = suu * c00 + suv * c01 + su * c02
+    ok = (n >= MIN_POINTS) & (det > 1e-9 * n * n * n)
+    inv = 1.0 / torch.where(ok, det, torch.ones_like(det))
+    a, b, c = x * inv, y * inv, t * inv
+    rss = sww - (a * suw + b * svw + c * sw)
+    return a, b, c, torch.clamp(rss, min=0.0), ok
+
+
+def box_fits(zs: torch.Tensor, valid: torch.Tensor, r: int, cam) -> Fits:
+    """The centred ``(2 r + 1)^2`` window fits of every pixel (:func:`ddm.boxfit.box_fit_windows`).
+
+    ``zs`` (B, H, W) float64 depth with a safe value (1) at invalid pixels, ``valid`` its
+    mask, ``cam`` ``(fx, fy, cx, cy)`` as (B or 1, 1, 1) float64 tensors."""
+    m = valid.to(zs.dtype)
+    x = torch.where(valid, 1.0 / zs, torch.zeros_like(zs))
+    s = _sums(x, m, r)
+    a, b, c, rss, ok = _solve(*s)
+    fx = cam[0]
+    n = s[0]
+    good = ok & (c > 0.0)
+    den = torch.where(good, (n - 3.0) * c * c, torch.ones_like(c))
+    with torch.no_grad():
+        score = torch.where(good, _f32(rss * (fx * fx) / den), torch.full_like(c, float("inf")))
+    return Fits(a, b, c, good, score, cam)
+
+
+def _ray_facing(nx, ny, nz, cam, ok):
+    """(nx, ny, nz) normalised and turned toward each pixel's ray where ``ok`` (NaN
+    elsewhere is applied by the caller): as ``store_normal``; safe for gradients."""
+    fx, fy, cx, cy = cam
+    h, w = nx.shape[-2:]
+    rx = (torch.arange(w, dtype=nx.dtype, device=nx.device).reshape(1, 1, w) - cx) / fx
+    ry = (torch.arange(h, dtype=nx.dtype, device=nx.device).reshape(1, h, 1) - cy) / fy
+    n2 = nx * nx + ny * ny + nz * nz
+    ok = ok & (n2 > 0) & torch.isfinite(n2)
+    inv = torch.rsqrt(torch.where(ok, n2, torch.ones_like(n2)))
+    dot = nx * rx + ny * ry + nz
+    inv = torch.where(ok, torch.where(dot > 0, -inv, inv), torch.zeros_like(inv))
+    return nx * inv, ny * inv, nz * inv, ok
+
+
+def _gather_plane(f: Fits, k: torch.Tensor, shift: int):
+    """The plane (a, b, c) and centre offset (dv, du) of window ``k`` (index into SHIFTS) per pixel."""
+    a = torch.zeros_like(f.a)
+    b = torch.zeros_like(f.b)
+    c = torch.zeros_like(f.c)
+    dvs = torch.zeros_like(k)
+    dus = torch.zeros_like(k)
+    for i, (dv, du) in enumerate(_SHIFTS):
+        sel = k == i
+        a = torch.where(sel, _at(f.a, shift * dv, shift * du, 0.0), a)
+        b = torch.where(sel, _at(f.b, shift * dv, shift * du, 0.0), b)
+        c = torch.where(sel, _at(f.c, shift * dv, shift * du, 1.0), c)
+        dvs = torch.where(sel, torch.full_like(k, shift * dv), dvs)
+        dus = torch.where(sel, torch.full_like(k, shift * du), dus)
+    return a, b, c, dvs, dus
+
+
+def _plane_normal(a, b, c, dvs, dus, cam):
+    """The normal of the plane ``w = a du + b dv + c`` around the window centre (v + dvs,
+    u + dus), in camera coordinates (not unit)."""
+    fx, fy, cx, cy = cam
+    h, w = a.shape[-2:]
+    u = torch.arange(w, dtype=a.dtype, device=a.device).reshape(1, 1, w)
+    v = torch.arange(h, dtype=a.dtype, device=a.device).reshape(1, h, 1)
+    return fx * a, fy * b, c - a * (u + dus - cx) - b * (v + dvs - cy)
+
+
+def choose_local(zs, valid, fits: Fits, big: Fits | None, shift: int, gate: torch.Tensor,
+                 big_gate: torch.Tensor, inv_var: torch.Tensor, scale: torch.Tensor, cam):
+    """:func:`depthnormals.ddm.boxfit._choose_local_rows` for a batch: the large window where
+    its residual is within ``big_gate f``, else the centred one within ``gate f``, else the
+    one of the nine whose plane explains the pixel's own 3x3 best (squared residuals in noise
+    units ``f / inv_var``, each capped at LOCAL_CAP). ``scale`` (B, H, W) is ``f``, the tile's
+    variance over the frame's; ``gate``, ``big_gate``, ``inv_var`` (B, 1, 1) float64.
+    Returns (nx, ny, nz, ok), facing the camera."""
+    fx = cam[0]
+    h, w = zs.shape[-2:]
+    zd = zs.detach()
+    with torch.no_grad():
+        fsd = fx * torch.sqrt(inv_var) / torch.sqrt(scale)
+        take_big = valid & (big.score <= big_gate * scale) if big is not None else \
+            torch.zeros_like(valid)
+        centred = fits.score <= gate * scale
+        pa, pb, pc = _f32(fits.a), _f32(fits.b), _f32(fits.c)
+        u = torch.arange(w, dtype=zs.dtype, device=zs.device).reshape(1, 1, w)
+        v = torch.arange(h, dtype=zs.dtype, device=zs.device).reshape(1, h, 1)
+        kc_all = pc - pa * u - pb * v  # the plane in image coordinates, at its own window
+        pix = []  # the 3x3: (z fsd, u, v, ok)
+        for dv in (-1, 0, 1):
+            for du in (-1, 0, 1):
+                pix.append((_at(zd, dv, du, 1.0) * fsd, u + du, v + dv, _at(valid, dv, du, False)))
+        best = torch.full_like(zd, float("inf"))
+        kbest = torch.zeros(zd.shape, dtype=torch.long, device=zd.device)
+        for i, (dv, du) in enumerate(_SHIFTS):
+            sv, su = shift * dv, shift * du
+            ka = _at(pa, sv, su, 0.0)
+            kb = _at(pb, sv, su, 0.0)
+            kc = _at(kc_all, sv, su, 0.0)
+            exists = _at(fits.score, sv, su, float("inf")) < float("inf")
+            sk = torch.zeros_like(zd)
+            for zi, ui, vi, oki in pix:
+                res = fsd - zi * (ka * ui + kb * vi + kc)
+                sk = sk + torch.where(oki, torch.clamp(res * res, max=LOCAL_CAP), 0.0)
+            sk = torch.where(exists, sk, float("inf"))
+            take = sk < best
+            best = torch.where(take, sk, best)
+            kbest = torch.where(take, i, kbest)
+        kbest = torch.where(centred, 0, kbest)
+        found = centred | (best < float("inf"))
+    a, b, c, dvs, dus = _gather_plane(fits, kbest, shift)
+    nx, ny, nz = _plane_normal(a, b, c, dvs, dus, cam)
+    ok = valid & found
+    if big is not None:
+        bx, by, bz = big.normal()
+        nx, ny, nz = (torch.where(take_big, q, p) for p, q in ((nx, bx), (ny, by), (nz, bz)))
+        ok = torch.where(take_big, big.good, ok)
+    return _ray_facing(nx, ny, nz, cam, ok)
+
+
+def choose_plain(valid, fits: Fits, big: Fits | None, shift: int, gate: float, big_gate: float,
+                 self_weight: float, cam):
+    """:func:`depthnormals.ddm.boxfit._choose_rows` (no noise level): the large window within
+    ``big_gate``, else the centred one within ``gate``, else the least residual of the nine
+    (the centred one's times ``self_weight``). Returns (nx, ny, nz, ok) facing the camera."""
+    with torch.no_grad():
+        s0 = fits.score
+        best = s0 * self_weight
+        kbest = torch.zeros(s0.shape, dtype=torch.long, device=s0.device)
+        search = ~(s0 <= gate)
+        for i, (dv, du) in enumerate(_SHIFTS[1:], start=1):
+            sk = _at(s0, shift * dv, shift * du, float("inf"))
+            take = search & (sk < best)
+            best = torch.where(take, sk, best)
+            kbest = torch.where(take, i, kbest)
+        found = best < float("inf")
+        take_big = valid & (big.score <= big_gate) if big is not None else torch.zeros_like(valid)
+    a, b, c, dvs, dus = _gather_plane(fits, kbest, shift)
+    nx, ny, nz = _plane_normal(a, b, c, dvs, dus, cam)
+    ok = valid & found
+    if big is not None:
+        bx, by, bz = big.normal()
+        nx, ny, nz = (torch.where(take_big, q, p) for p, q in ((nx, bx), (ny, by), (nz, bz)))
+        ok = torch.where(take_big, big.good, ok)
+    return _ray_facing(nx, ny, nz, cam, ok)
+
+
+def _growth(zs: torch.Tensor, zref: torch.Tensor, half: torch.Tensor) -> torch.Tensor:
+    """:func:`depthnormals.ddm.support._gate_growth` in float32: ``(z / zref)^(half / 2)``
+    (``half`` 0..4 per frame, (B, 1, 1); 0: 1)."""
+    izref = torch.where(zref > 0, 1.0 / zref, torch.zeros_like(zref)).float()
+    t = zs.float() * izref
+    q = torch.sqrt(t)
+    g = torch.where(half == 4, t * t, torch.where(half == 3, t * q, torch.where(half == 2, t, q)))
+    return torch.where(half > 0, g, torch.ones_like(g))
+
+
+def choose_least(zs, valid, fits: Fits, big: Fits | None, shift: int, gate: torch.Tensor,
+                 zref: torch.Tensor, half: torch.Tensor, cam, big_scale: int = 2):
+    """:func:`depthnormals.ddm.support._choose_least_rows` for a batch: the large window
+    (fitted on every second row and column, ``big``; a pixel reads cell (v // 2, u // 2))
+    where its score is within the gate, else the centred window within the gate, else the
+    least score of the nine (the centred one wins ties); gates (B, 1, 1) in float32 grow
+    with depth as ``(z / zref)^(half / 2)``. Returns (nx, ny, nz, ok) facing the camera."""
+    h, w = zs.shape[-2:]
+    with torch.no_grad():
+        fac = _growth(zs.detach(), zref, half)
+        g0 = gate.float() * fac
+        s0 = fits.score.float()
+        best = torch.where(s0 <= g0, torch.full_like(s0, -1.0), s0)
+        kbest = torch.zeros(s0.shape, dtype=torch.long, device=s0.device)
+        for i, (dv, du) in enumerate(_SHIFTS[1:], start=1):
+            sk = _at(s0, shift * dv, shift * du, float("inf"))
+            take = sk < best
+            best = torch.where(take, sk, best)
+            kbest = torch.where(take, i, kbest)
+        found = best < float("inf")
+        if big is not None:
+            bs = big.score.float().repeat_interleave(big_scale, -2).repeat_interleave(big_scale, -1)
+            take_big = bs[:, :h, :w] <= g0
+    a, b, c, dvs, dus = _gather_plane(fits, kbest, shift)
+    nx, ny, nz = _plane_normal(a, b, c, dvs, dus, cam)
+    ok = valid & found
+    if big is not None:
+        bx, by, bz = (q.repeat_interleave(big_scale, -2).repeat_interleave(big_scale, -1)[:, :h, :w]
+                      for q in big.normal())
+        bgood = big.good.repeat_interleave(big_scale, -2).repeat_interleave(big_scale, -1)[:, :h, :w]
+        nx, ny, nz = (torch.where(take_big, q, p) for p, q in ((nx, bx), (ny, by), (nz, bz)))
+        ok = ok & torch.where(take_big, bgood, torch.ones_like(ok))
+    return _ray_facing(nx, ny, nz, cam, ok)
+
+
+def upsample_half(n, valid_full, cam_full):
+    """Every pixel takes the normal of its 2x2 cell (``n`` = (nx, ny, nz, ok) on every second
+    row and column), turned toward its own ray; not ok where its depth is invalid."""
+    h, w = valid_full.shape[-2:]
+    up = [q.repeat_interleave(2, -2).repeat_interleave(2, -1)[:, :h, :w] for q in n]
+    return _ray_facing(up[0], up[1], up[2], cam_full, up[3] & valid_full)
+
+
+def keep_estimator(base, out, zs, kappa: torch.Tensor, cam):
+    """:func:`depthnormals.ddm.auto._keep_rows`: where the estimator's normal ``base``
+    (nx, ny, nz, ok) agrees with the box-fit's ``out`` within ``kappa`` (squared distance of
+    their inverse-depth slopes, (B, 1, 1)), the estimator's normal; not ok where the
+    estimator has none."""
+    fx, fy, cx, cy = cam
+    h, w = zs.shape[-2:]
+    A = torch.arange(w, dtype=zs.dtype, device=zs.device).reshape(1, 1, w) - cx
+    B = torch.arange(h, dtype=zs.dtype, device=zs.device).reshape(1, h, 1) - cy
+    with torch.no_grad():
+        def slopes(x, y, t):
+            g = x * A / fx + y * B / fy + t
+            g = torch.where(g == 0, torch.ones_like(g), g)
+            return x / fx / g, y / fy / g
+
+        pa, pb = slopes(*(q.detach().to(zs.dtype) for q in base[:3]))
+        qa, qb = slopes(*(q.detach().to(zs.dtype) for q in out[:3]))
+        keep = base[3] & out[3] & ((pa - qa) ** 2 + (pb - qb) ** 2 < kappa)
+    nx, ny, nz = (torch.where(keep, p.to(q.dtype), q) for p, q in zip(base[:3], out[:3], strict=True))
+    return _ray_facing(nx, ny, nz, cam, base[3] & out[3])
+
