@@ -18,20 +18,27 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
   that hold the pixel standing for the chosen one), inflated by ``sqrt(residual / sigma^2)``
   where the window's residual variance exceeds the noise (a chi-square test: a window across
   two surfaces is biased as well as noisy);
-- on both noisy branches, the mean angle of the four neighbours' normals to the pixel's is added
-  in quadrature (:data:`SPREAD`): where the window choice flips between surfaces the error is a
-  wrong window, not noise;
-- **the measured support** (``support_select``): the measured mean error of the chosen radius
-  (:attr:`depthnormals.ddm.support.SupportProfile.error`), grown with depth as the measured
-  residual does (``(z / z_ref)^(gamma / 2)``) and scaled by ``sqrt(residual / expected)``, the
-  chosen window's residual over the median residual at its depth;
+- on the box-fit branch the noise error is first scaled by how far the fit error measured on
+  the depth exceeds the i.i.d. prediction at the box radius (:func:`_excess_at`, at least 1:
+  noise correlated over a pixel or so), and the mean angle of the four neighbours' normals to
+  the pixel's is added in quadrature (:data:`SPREAD`): where the window choice flips between
+  surfaces the error is a wrong window, not noise;
+- **the measured support** (``support_select``), self-calibrated on the frame: the level
+  ``e_I`` is the mean error of the branch's own output normals in plane interiors, from the
+  median angle of interior pixel pairs :data:`SPAN` large-window radii apart
+  (:func:`_interior_error`); per pixel ``e_I sqrt(growth) A q^p`` (``growth`` the measured
+  residual's, ``(z / z_ref)^gamma``), with ``A q^p`` from the centred window's residual ratio
+  inside the gate and a heavier :data:`A_SHIFTED` ``q_min^(1/4)`` where the pixel took a
+  shifted window (near a discontinuity), plus :data:`SPREAD_SUPPORT` times the neighbours'
+  spread (:func:`_support_rows`);
 - **clean depth** (the plane hypotheses): the float rounding of the one-pixel stencils
   (``sigma / sqrt(6)``) plus, where the pixel's normal agrees with none of its four neighbours'
   (a facet narrower than two pixels: no one-sided stencil fits), the least angle between them.
 
-One vectorised pass per image (:func:`_fit_error_rows`, :func:`_spread_rows`) over quantities
-the branches already computed. Conversions to the von Mises-Fisher concentration of Bae et al.
-(ICCV 2021): :func:`uncertainty_to_kappa`, :func:`kappa_to_uncertainty`.
+One vectorised pass per image (:func:`_fit_error_rows`, :func:`_support_rows`,
+:func:`_spread_rows`) over quantities the branches already computed. Conversions to the von
+Mises-Fisher concentration of Bae et al. (ICCV 2021): :func:`uncertainty_to_kappa`,
+:func:`kappa_to_uncertainty`.
 """
 
 from __future__ import annotations
@@ -55,7 +62,16 @@ from .auto import (
 )
 from .boxfit import box_fit_from_prepared, box_fit_windows
 from .noise import TILE, noise_pass
-from .support import support_profile, support_select
+from .support import (
+    BIG_FACTOR,
+    EXCESS_FLOOR,
+    MAX_RADIUS,
+    PAIR_TO_ERROR,
+    SupportProfile,
+    support_profile,
+    support_select,
+)
+from .support import GATE as SUPPORT_GATE
 
 __all__ = ["UNCERTAINTY_METHODS", "kappa_to_uncertainty", "normals_with_uncertainty",
            "uncertainty_to_covariance", "uncertainty_to_kappa"]
@@ -64,13 +80,37 @@ __all__ = ["UNCERTAINTY_METHODS", "kappa_to_uncertainty", "normals_with_uncertai
 RAYLEIGH_MEAN = math.sqrt(math.pi / 2.0)
 #: ``S_uu`` of the one-pixel stencils of the plane hypotheses (a 3x3: 3 columns of 1 + 1).
 CLEAN_SUU = 6.0
-#: Noisy branches: the mean angle of the four neighbours' normals to the pixel's (where the
+#: Box-fit branch: the mean angle of the four neighbours' normals to the pixel's (where the
 #: window choice changes: an edge, a crease) is added in quadrature with this weight to the
-#: fit's error (measured: without it the top decile of the synthetic and real columns was
-#: predicted 2-5x too low; benchmarks/uncertainty_calibration.py).
-SPREAD = 1.0
+#: fit's error (measured: without it the top decile of the synthetic columns was predicted
+#: 2-5x too low; 1 left tof's and kinect_v2's top deciles 1.3-1.8x low, 2 brings them within
+#: 25 % on the synthetic seed 0, the gaussian top decile then 0.6x; docs/benchmarks.md 17).
+SPREAD = 2.0
 #: The neighbours (dv, du) whose normals the clean branch's map compares with the pixel's.
 CROSS = np.array([[-1, 0], [0, -1], [0, 1], [1, 0]], dtype=np.int64)
+
+#: Measured support: the output normals of two plane-interior pixels this many large-window
+#: radii apart (``SPAN R + 1`` pixels, ``R = BIG_FACTOR r``) come from disjoint windows whose
+#: errors no longer share the depth's correlated part; their median angle gives the frame's
+#: interior error (:func:`_interior_error`). At ``2 R + 1`` the pairs read 0.56-0.9 of the
+#: observed interior error (correlated errors), at ``4 R + 1`` 0.6-1.2, on the synthetic and
+#: real training frames (benchmarks/uncertainty_calibration.py).
+SPAN = 4
+#: Grid spacing (pixels) of the interior pairs' first pixels.
+PAIR_GRID = 6
+#: Fewest interior pairs for :func:`_interior_error`; with fewer the profile's error stands.
+MIN_PAIRS = 30
+#: Measured support, per pixel (module doc): ``e_I sqrt(growth) A q^p + SPREAD_SUPPORT *
+#: spread``. Where the centred window passes the gate (``q0 <= support.GATE``), ``A = A_INSIDE``,
+#: ``q = max(q0, Q_FLOOR)``, ``p = 1/8``; elsewhere (a shifted window: near an edge)
+#: ``A = A_SHIFTED``, ``q = max(q_min, Q_FLOOR)`` the least residual ratio of the nine
+#: windows, ``p = 1/4``. Fitted (a coordinate search on the log ratios of the decile bins) on
+#: the training split of benchmarks/uncertainty_calibration.py (synthetic seed 0; real
+#: nyu_registered and tum_kinect1), checked on the rest (docs/benchmarks.md, section 17).
+A_INSIDE = 0.65
+A_SHIFTED = 2.45
+Q_FLOOR = 0.6
+SPREAD_SUPPORT = 1.75
 
 #: Methods whose uncertainty has a closed form (with their window half-size from the options).
 UNCERTAINTY_METHODS = ("3f2n+", "fals", "pcl-average-3d-gradient", "pcl-average-depth-change",
@@ -215,6 +255,176 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
+def _growth(zq, izref, half):
+    """``(z / zref)^(half / 2)`` (``izref = 1 / zref``, ``half`` an integer 0..4), without a
+    transcendental function: how the plane residual grows with depth."""
+    t = np.float32(zq) * izref
+    q = np.sqrt(t)
+    if half == 0:
+        return np.float32(1.0)
+    return t * t if half == 4 else (t * q if half == 3 else (t if half == 2 else q))
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _interior_pairs(normals, z, score, gates, span, grid, out):
+    """Angles (degrees) between the normals of pixel pairs ``span`` apart (right and down)
+    on a grid of spacing ``grid`` whose centred windows both pass the interior test (residual
+    ``score`` at most ``gate (z / zref)^(half / 2)``; ``score`` (H', W'), a pixel reading
+    ``score[v // step, u // step]``, ``step`` 2 where ``H' < H``), each divided by the square
+    root of the pair's mean growth (the angle at ``zref``). ``gates = (gate, zref, half)``.
+    Writes ``out`` rows, returns their number."""
+    gate, zref, half = gates
+    h, w = z.shape
+    step = 2 if score.shape[0] < h else 1
+    izref = np.float32(1.0 / zref if zref > 0.0 else 0.0)
+    g0 = np.float32(gate)
+    k = 0
+    for v in range(0, h, grid):
+        for u in range(0, w, grid):
+            za = z[v, u]
+            if not (za == za):
+                continue
+            fa = _growth(za, izref, half)
+            if not (score[v // step, u // step] <= g0 * fa):
+                continue
+            for o in range(2):
+                vv = v + span * o
+                uu = u + span * (1 - o)
+                if vv >= h or uu >= w or k >= out.size:
+                    continue
+                zb = z[vv, uu]
+                if not (zb == zb):
+                    continue
+                fb = _growth(zb, izref, half)
+                if not (score[vv // step, uu // step] <= g0 * fb):
+                    continue
+                d = (normals[v, u, 0] * normals[vv, uu, 0] + normals[v, u, 1] * normals[vv, uu, 1]
+                     + normals[v, u, 2] * normals[vv, uu, 2])
+                if not (d == d):
+                    continue
+                d = min(1.0, max(-1.0, d))
+                out[k] = math.degrees(math.acos(d)) / math.sqrt(0.5 * (fa + fb))
+                k += 1
+    return k
+
+
+def _interior_error(normals, z, score, prof: SupportProfile) -> float:
+    """The mean angular error (degrees, at the profile's reference depth) of the branch's
+    output normals in plane interiors, measured on the frame: ``PAIR_TO_ERROR`` times the
+    median angle of the interior pairs :data:`SPAN` large-window radii apart
+    (:func:`_interior_pairs`); the profile's error at its radius where there are fewer than
+    :data:`MIN_PAIRS`."""
+    i = prof.radii.index(prof.radius)
+    fallback = prof.error[i] if prof.error[i] == prof.error[i] else 0.0
+    big = min(MAX_RADIUS, round(BIG_FACTOR * prof.radius))
+    h, w = z.shape
+    out = np.empty(2 * (h // PAIR_GRID + 1) * (w // PAIR_GRID + 1))
+    zref = prof.depth if prof.depth == prof.depth else 1.0
+    half = round(2.0 * prof.exponent) if prof.depth == prof.depth else 0
+    gates = (float(prof.residual[i]), float(zref), half)
+    k = _interior_pairs(normals, z, score, gates, SPAN * big + 1, PAIR_GRID, out)
+    return PAIR_TO_ERROR * float(np.median(out[:k])) if k >= MIN_PAIRS else fallback
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _support_rows(v0, v1, z, normals, score, shift, model, out):
+    """Rows ``[v0, v1)`` of the measured support's map (degrees) into ``out`` (H, W).
+
+    ``model = (e_i, res, zref, half, gate)``: the interior error ``e_i`` (degrees at
+    ``zref``), the plane residual ``res`` at the chosen radius (footprints^2 at ``zref``),
+    both growing with depth (``(z / zref)^(half / 2)`` the residual, its square root the
+    error), and the gate (in residuals) of the centred window. ``score`` (H', W'): the
+    residual variances of the radius's windows, a pixel reading ``[v // step, u // step]``;
+    ``q0`` the centred one's over ``res``, ``q_min`` the least of the nine ``shift (i, j)``
+    away. Per pixel ``e_i sqrt(growth) A q^p + SPREAD_SUPPORT spread`` (:data:`A_INSIDE`,
+    :data:`A_SHIFTED`, :data:`Q_FLOOR`), ``spread`` the mean angle (degrees) of the four
+    neighbours' normals to the pixel's; NaN where the normal is NaN. Every loop runs along a
+    row."""
+    e_i, res0, zref, half, gate = model
+    h, w = z.shape
+    hs, ws = score.shape
+    step = 2 if hs < h else 1
+    f32 = np.float32
+    izref = f32(1.0 / zref if zref > 0.0 else 0.0)
+    nan = f32(np.nan)
+    q_s = np.empty(ws, dtype=f32)
+    qm = np.empty(w, dtype=f32)
+    q0 = np.empty(w, dtype=f32)
+    ring = np.empty((3, 3, w), dtype=f32)
+    acc = np.empty(w, dtype=f32)
+    cnt = np.empty(w, dtype=f32)
+    if v0 > 0:
+        _planar_row(normals, v0 - 1, ring[(v0 - 1) % 3])
+    _planar_row(normals, v0, ring[v0 % 3])
+    dg = f32(180.0 / math.pi)
+    ir = f32(1.0 / res0 if res0 > 0.0 else 0.0)
+    g = f32(gate)
+    fl = f32(Q_FLOOR)
+    cap = f32(1e4)
+    ai = f32(A_INSIDE)
+    ash = f32(A_SHIFTED)
+    cs = f32(SPREAD_SUPPORT)
+    ei = f32(e_i)
+    for v in range(v0, v1):
+        vs = v // step
+        q_s[:] = np.inf
+        for dv in range(-1, 2):
+            a = vs + shift * dv
+            if a < 0 or a >= hs:
+                continue
+            for du in range(-1, 2):
+                d = shift * du
+                lo = max(0, -d)
+                hi = min(ws, ws - d)
+                _min_into(score[a, lo + d:hi + d], q_s[lo:hi])
+        srow = score[vs]
+        if step == 1:
+            qm[:] = q_s[:w]
+            q0[:] = srow[:w]
+        else:
+            for u in range(w):
+                qm[u] = q_s[u >> 1]
+                q0[u] = srow[u >> 1]
+        if v + 1 < h:
+            _planar_row(normals, v + 1, ring[(v + 1) % 3])
+        cur = ring[v % 3]
+        x = cur[0]
+        y = cur[1]
+        t = cur[2]
+        acc[:] = 0.0
+        cnt[:] = 0.0
+        for k in range(CROSS.shape[0]):
+            a = v + CROSS[k, 0]
+            du = CROSS[k, 1]
+            if a < 0 or a >= h:
+                continue
+            o = ring[a % 3]
+            lo = max(0, -du)
+            hi = min(w, w - du)
+            _chord_into(x[lo:hi], y[lo:hi], t[lo:hi], o[0, lo + du:hi + du],
+                        o[1, lo + du:hi + du], o[2, lo + du:hi + du], acc[lo:hi], cnt[lo:hi])
+        zrow = z[v]
+        for u in range(w):  # branch-free, float32
+            zq = zrow[u]
+            gr = _growth(zq, izref, half) if zq == zq else f32(1.0)
+            inv = ir / gr
+            a0 = q0[u] * inv
+            a0 = a0 if a0 < cap else cap
+            am = qm[u] * inv
+            am = am if am < cap else cap
+            inside = a0 <= g
+            q = a0 if inside else am
+            q = q if q > fl else fl
+            r2 = np.sqrt(q)
+            r4 = np.sqrt(r2)
+            fac = ai * np.sqrt(r4) if inside else ash * r4
+            sp = dg * acc[u] / cnt[u] if cnt[u] > f32(0.0) else f32(0.0)
+            e = ei * np.sqrt(gr) * fac + cs * sp
+            ok = x[u] + y[u] + t[u] - (x[u] + y[u] + t[u]) == f32(0.0)
+            out[v, u] = e if ok else nan
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def _planar_row(normals, v, out3):
     """Row ``v`` of ``normals`` (H, W, 3) into ``out3`` (3, W)."""
     for u in range(normals.shape[1]):
@@ -308,7 +518,18 @@ def _fit_error(z, normals, score, shift, tiles, depth, big, cam) -> np.ndarray:
     return out
 
 
-def _box_branch(z, cam, sigma, levels):
+def _excess_at(prof: SupportProfile, r: int) -> float:
+    """How far the fit error measured on the depth exceeds the i.i.d. prediction at the
+    measured radius nearest ``r`` (at least 1; 1 where that radius's prediction is below
+    :data:`depthnormals.ddm.support.EXCESS_FLOOR` degrees, scene-dominated there)."""
+    if not prof.measured:
+        return 1.0
+    i = min(range(len(prof.radii)), key=lambda j: abs(prof.radii[j] - r))
+    m, p = prof.measured[i], prof.predicted[i]
+    return max(1.0, m / p) if p >= EXCESS_FLOOR and m == m else 1.0
+
+
+def _box_branch(z, cam, sigma, levels, prof):
     """The i.i.d. box-fit branch with its map (module doc)."""
     fx, fy, cx, cy = cam
     r = box_radius(sigma)
@@ -319,7 +540,8 @@ def _box_branch(z, cam, sigma, levels):
                                 self_weight=1.0, big_radius=big, sigma=sigma,
                                 sigma_tiles=(t, TILE), out_scores=scores)
     score, big_s = scores
-    tiles = _tile_maps(z, fx, fy, sigma, r, levels, NOISE_CLEAN)
+    e0, var, tile = _tile_maps(z, fx, fy, sigma, r, levels, NOISE_CLEAN)
+    tiles = (e0 * _excess_at(prof, r), var, tile)
     bigs = (big_s, GATE, math.sqrt(_full_suu(r) / _full_suu(big))) if big > r else None
     unc = _fit_error(z, out, score, r, tiles, (1.0, 0, 1.0, True, SPREAD), bigs, cam)
     return out, unc
@@ -334,17 +556,19 @@ def _support_branch(z, cam, sigma, prof):
     out = support_select(z, fx, fy, cx, cy, sigma, profile=prof, out_scores=scores)
     score, shift, half_n = scores
     i = prof.radii.index(prof.radius)
-    e = math.radians(prof.error[i]) / RAYLEIGH_MEAN if prof.error[i] == prof.error[i] else 0.0
-    tiles = (np.full((1, 1), e), np.full((1, 1), max(prof.residual[i], 1e-30)), max(z.shape) + 1)
+    e_i = _interior_error(out, z, score, prof)
     zref = prof.depth if prof.depth == prof.depth else 1.0
     half = round(2.0 * prof.exponent) if prof.depth == prof.depth else 0
-    depth = (zref, half, 0.25, False, SPREAD)
+    model = (float(e_i), float(max(prof.residual[i], 1e-30)), float(zref), half, float(SUPPORT_GATE))
     if half_n is None:
-        return out, _fit_error(z, out, score, shift, tiles, depth, None, cam)
+        unc = np.empty(z.shape, dtype=np.float32)
+        run_rows(_support_rows, z.shape[0], z, out, score, int(shift), model, unc, min_rows=16)
+        return out, unc
     zd = np.ascontiguousarray(z[::2, ::2])
     zd = np.where(np.isnan(zd), zd.dtype.type(zref), zd)  # the half grid's cells all chose
-    coarse = _fit_error(zd, half_n, score, shift, tiles, depth, None,
-                        (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy))
+    coarse = np.empty(zd.shape, dtype=np.float32)
+    run_rows(_support_rows, zd.shape[0], zd, half_n, score, int(shift), model, coarse,
+             min_rows=8)
     unc = np.empty(z.shape, dtype=np.float32)
     run_rows(_upsample_rows, z.shape[0], coarse, out, unc, min_rows=16)
     return out, unc
@@ -425,7 +649,7 @@ def _plus(depth, K, depth_scale, options):
     sigma = p.sigma
     prof = support_profile(z, *c, sigma)
     if not needs_measured_support(p, prof):
-        return _box_branch(z, c, sigma, p.tiles())
+        return _box_branch(z, c, sigma, p.tiles(), prof)
     return _support_branch(z, c, sigma, prof)
 
 
