@@ -206,6 +206,15 @@ def run_gpu(z: np.ndarray, K: np.ndarray, device: str, batch: int, reps: int, co
         if compile_:
             f = torch.compile(lambda d, m=m: dt.estimate_normals(d, Kt, method=m))
             cases[f"torch {m} (torch.compile)"] = lambda f=f: f(zt)
+    # the default on sensor-like depth: its noisy branches (independent noise: the box-fit;
+    # quantised disparity: the measured support)
+    rng = np.random.default_rng(0)
+    noisy = (z + rng.normal(size=z.shape) * 0.3 * z / K[0, 0]).astype(np.float32)
+    quant = np.where(z > 0, 580 * 0.075 / (np.round(580 * 0.075 / np.where(z > 0, z, 1) * 8) / 8), 0)
+    for label, d in (("gaussian noise 0.3 px: box-fit", noisy), ("quantised disparity: measured support",
+                                                                  quant.astype(np.float32))):
+        dd = torch.from_numpy(d)[None, None].repeat(batch, 1, 1, 1).to(dev)
+        cases[f"torch 3f2n+ ({label})"] = lambda dd=dd: dt.estimate_normals(dd, Kt)
     elapsed = _timer(dev)
     rows = []
     with torch.no_grad():

@@ -14,12 +14,18 @@ import depthnormals as dn
 import depthnormals.torch as dt
 from depthnormals.analytic import planar_interior, tilted_plane
 
+
+def _tn(*args, **kwargs):
+    """The torch implementation itself (a CPU tensor without gradients would otherwise be
+    computed by the numba library: ``backend="auto"``)."""
+    return dt.estimate_normals(*args, backend="torch", **kwargs)
+
 K = (60.0, 60.0, 39.5, 29.5)
 
 
 @pytest.mark.parametrize("method", dt.METHODS)
 def test_fronto_parallel_wall(method):
-    n = dt.estimate_normals(torch.full((2, 1, 7, 9), 3.0), (50.0, 50.0, 4.0, 3.0), method=method)
+    n = _tn(torch.full((2, 1, 7, 9), 3.0), (50.0, 50.0, 4.0, 3.0), method=method)
     expected = torch.tensor([0.0, 0.0, -1.0]).reshape(1, 3, 1, 1).expand_as(n)
     torch.testing.assert_close(n, expected)
     assert (n[:, 2] < 0).all()  # kornia's depth_to_normals gives (0, 0, +1) here
@@ -30,7 +36,7 @@ def test_tilted_plane_exact(method):
     """The analytic tilted plane (normal (0.3, -0.4, -1) normalised): 3F2N and SNE-RoadSeg are
     exact on planes (inverse depth is linear), D2NT's depth differences within 0.2 deg."""
     r = tilted_plane().render(K=K, shape=(60, 80))
-    n = dt.estimate_normals(torch.from_numpy(r.depth)[None], K, method=method)
+    n = _tn(torch.from_numpy(r.depth)[None], K, method=method)
     assert n.dtype == torch.float64
     got = n[0].permute(1, 2, 0).numpy()
     err = dn.angular_error(got, r.normals)
@@ -47,12 +53,12 @@ def test_axes_and_facing(method, rough_sphere):
     whose normals point away, documents -x and -y for the same surfaces. Every finite normal
     is unit and faces the camera."""
     v, u = torch.meshgrid(torch.arange(30.0), torch.arange(40.0), indexing="ij")
-    right = dt.estimate_normals((2.0 + 0.02 * u)[None], K, method=method)[0, :, 15, 20]
-    down = dt.estimate_normals((2.0 + 0.02 * v)[None], K, method=method)[0, :, 15, 20]
+    right = _tn((2.0 + 0.02 * u)[None], K, method=method)[0, :, 15, 20]
+    down = _tn((2.0 + 0.02 * v)[None], K, method=method)[0, :, 15, 20]
     assert right[0] > 0.1 and abs(right[1]) < 1e-3 and right[2] < 0
     assert down[1] > 0.1 and abs(down[0]) < 1e-3 and down[2] < 0
     z = torch.from_numpy(rough_sphere(4, 0.004).astype(np.float32))[None]
-    n = dt.estimate_normals(z, (131.25, 131.25, 79.5, 59.5), method=method)[0]
+    n = _tn(z, (131.25, 131.25, 79.5, 59.5), method=method)[0]
     ok = torch.isfinite(n[0])
     uu = (torch.arange(160.0) - 79.5) / 131.25
     vv = (torch.arange(120.0)[:, None] - 59.5) / 131.25
@@ -67,7 +73,7 @@ def test_planar_interior_of_box_scene():
     from depthnormals.analytic import box_on_floor
 
     r = box_on_floor().render(K=K, shape=(60, 80))
-    n = dt.estimate_normals(torch.from_numpy(r.depth)[None], K, method="3f2n+")[0].permute(1, 2, 0).numpy()
+    n = _tn(torch.from_numpy(r.depth)[None], K, method="3f2n+")[0].permute(1, 2, 0).numpy()
     m = planar_interior(r, radius=2)
     assert m.sum() > 1000
     assert dn.angular_error(n, r.normals)[m].max() < 1e-6

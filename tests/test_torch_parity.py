@@ -15,6 +15,12 @@ import depthnormals as dn
 import depthnormals.torch as dt
 from depthnormals.analytic import make_scene, scene_names
 
+
+def _tn(*args, **kwargs):
+    """The torch implementation itself (a CPU tensor without gradients would otherwise be
+    computed by the numba library: ``backend="auto"``)."""
+    return dt.estimate_normals(*args, backend="torch", **kwargs)
+
 ROUGH_K = (131.25, 131.25, 79.5, 59.5)  # conftest.ROUGH_K: the rough scene's intrinsics
 
 DEFAULT_METHODS = ("3f2n", "d2nt", "sne-roadseg", "3f2n+", "d2nt+")
@@ -29,7 +35,7 @@ def _batch_torch(depths, Ks, method, **options):
     z = torch.from_numpy(np.stack(depths))[:, None]
     K = torch.from_numpy(np.stack([dn.as_intrinsics(k).matrix for k in Ks]))
     with torch.no_grad():
-        n = dt.estimate_normals(z, K, method=method, **options)
+        n = _tn(z, K, method=method, **options)
     assert n.shape == (len(depths), 3, *depths[0].shape) and n.dtype == torch.float32
     return n.permute(0, 2, 3, 1).numpy()
 
@@ -182,7 +188,7 @@ def test_parity_padded_batch(torusknot):
         padded[i, :c.shape[0], :c.shape[1]] = c
     Ks = torch.tensor([[K.fx, K.fy, K.cx - ou, K.cy - ov] for ov, ou in offs])
     with torch.no_grad():
-        n = dt.estimate_normals(torch.from_numpy(padded), Ks, method="3f2n+",
+        n = _tn(torch.from_numpy(padded), Ks, method="3f2n+",
                                 **SAME_MODULE).permute(0, 2, 3, 1).numpy()
     for i, (c, (ov, ou)) in enumerate(zip(crops, offs, strict=False)):
         ref = dn.estimate_normals(c, (K.fx, K.fy, K.cx - ou, K.cy - ov), method="3f2n+", **SAME_MODULE)

@@ -156,11 +156,10 @@ def _check_module(o: dict[str, Any]) -> None:
     if o["crf"] and o["curvature"] == "none":
         raise ValueError("the CRF weights its edges by the depth curvature k_q: pass a curvature "
                          "other than 'none', or crf=False for a correlation-only selection")
-    if o["selection"] not in ("curvature", "planes", "auto"):
-        raise ValueError(f"selection={o['selection']!r} is not implemented in depthnormals.torch "
-                         "(only 'curvature', 'planes' and 'auto', the clean branch of the numba "
-                         "default); use depthnormals.estimate_normals for the plane-fit and box-fit "
-                         "selections")
+    if o["selection"] == "plane-fit":
+        raise ValueError("selection='plane-fit' is not implemented in depthnormals.torch (every other "
+                         "selection is: 'auto', 'box-fit', 'planes', 'curvature'); use "
+                         "depthnormals.estimate_normals for it")
     if o["selection"] == "planes" and (o["crf"] or o["correlation"] != "none"):
         raise ValueError("the CRF and the correlations need the curvature selection: pass "
                          "selection='curvature' (or 'auto'), not 'planes'")
@@ -379,7 +378,7 @@ class EstimateNormals(nn.Module):
     K : optional
         Intrinsics to use when ``forward`` gets none; a tensor is kept as a buffer (it follows
         ``.to(device)``).
-    depth_scale, invalid, **options
+    depth_scale, invalid, backend, **options
         As :func:`estimate_normals`; checked here, at construction.
 
     Examples
@@ -392,11 +391,14 @@ class EstimateNormals(nn.Module):
     """
 
     def __init__(self, method: str = "3f2n+", K: Any = None, *, depth_scale: float | None = None,
-                 invalid: str = "nan", **options: Any):
+                 invalid: str = "nan", backend: str = "auto", **options: Any):
         super().__init__()
         _check_options(method, options)
         if not isinstance(invalid, str) or invalid not in ("nan", "zero"):
             raise ValueError(f"invalid must be 'nan' or 'zero'; got {invalid!r}")
+        if not isinstance(backend, str) or backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {', '.join(BACKENDS)}; got {backend!r}")
+        self.backend = backend
         self.method = method
         self.depth_scale = depth_scale
         self.invalid = invalid
@@ -412,7 +414,7 @@ class EstimateNormals(nn.Module):
         if K is None:
             raise ValueError("no intrinsics: pass K to forward or to the constructor")
         return estimate_normals(depth, K, method=self.method, depth_scale=self.depth_scale,
-                                invalid=self.invalid, **self.options)
+                                invalid=self.invalid, backend=self.backend, **self.options)
 
     def extra_repr(self) -> str:
         opts = "".join(f", {k}={v!r}" for k, v in self.options.items())

@@ -308,8 +308,9 @@ def keep_estimator(base, out, zs, kappa: torch.Tensor, cam):
             g = torch.where(g == 0, torch.ones_like(g), g)
             return x / fx / g, y / fy / g
 
-        pa, pb = slopes(*(q.detach().to(zs.dtype) for q in base[:3]))
-        qa, qb = slopes(*(q.detach().to(zs.dtype) for q in out[:3]))
+        # both as the numba kernels store them (float32)
+        pa, pb = slopes(*(q.detach().float().to(zs.dtype) for q in base[:3]))
+        qa, qb = slopes(*(q.detach().float().to(zs.dtype) for q in out[:3]))
         keep = base[3] & out[3] & ((pa - qa) ** 2 + (pb - qb) ** 2 < kappa)
     nx, ny, nz = (torch.where(keep, p.to(q.dtype), q) for p, q in zip(base[:3], out[:3], strict=True))
     return _ray_facing(nx, ny, nz, cam, base[3] & out[3])

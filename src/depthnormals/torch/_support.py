@@ -54,8 +54,10 @@ def _pairs(zf: torch.Tensor, h: int, w: int, r: int, cam) -> tuple[torch.Tensor,
     every = sample_every(r)
     d = 2 * r + 1
     dev = zf.device
-    vs = torch.arange(r, h - r, step, device=dev)
-    us = torch.arange(r, w - r, step, device=dev)
+    vs = torch.tensor(list(range(r, h - r, step)), dtype=torch.long, device=dev)
+    us = torch.tensor(list(range(r, w - r, step)), dtype=torch.long, device=dev)
+    if vs.numel() == 0 or us.numel() == 0:  # the image is smaller than one window
+        return zf.new_zeros((zf.shape[0], 0, 3)), torch.zeros((zf.shape[0], 0), dtype=torch.bool, device=dev)
     gv, gu = torch.meshgrid(vs, us, indexing="ij")
     c0 = torch.stack((gv.reshape(-1), gu.reshape(-1)), 1)
     s0, n0 = _fit(zf, c0, r, every, w, cam)
