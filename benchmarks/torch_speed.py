@@ -58,13 +58,13 @@ def cpu_cases(z: np.ndarray, K: np.ndarray, compile_: bool) -> dict:
     zt = torch.from_numpy(z)[None, None]
     Kt = torch.from_numpy(K.astype(np.float32))
     cases = {"kornia depth_to_normals": lambda: kornia(zt, Kt[None])}
-    for m in METHODS:
-        cases[f"torch {m}"] = lambda m=m: dt.estimate_normals(zt, Kt, method=m)
+    for m in METHODS:  # the torch implementation (backend "auto" would hand a CPU tensor to numba)
+        cases[f"torch {m}"] = lambda m=m: dt.estimate_normals(zt, Kt, method=m, backend="torch")
     for m in METHODS:
         cases[f"numba {m}"] = lambda m=m: dn.estimate_normals(z, K, method=m)
     if compile_:
         for m in ("3f2n", "3f2n+"):
-            f = torch.compile(lambda d, m=m: dt.estimate_normals(d, Kt, method=m))
+            f = torch.compile(lambda d, m=m: dt.estimate_normals(d, Kt, method=m, backend="torch"))
             t0 = time.perf_counter()
             f(zt)
             print(f"compiled torch {m}: first call (compile) {time.perf_counter() - t0:.1f} s")
@@ -120,15 +120,18 @@ def run_cpu_batch(z: np.ndarray, K: np.ndarray, batch: int, repeats: int, compil
     Kt = torch.from_numpy(K.astype(np.float32))
     Kb = Kt[None].expand(batch, 3, 3)
     cases = {"kornia depth_to_normals": lambda: kornia(zt, Kb),
-             "torch 3f2n+ (eager)": lambda: dt.estimate_normals(zt, Kt, method="3f2n+")}
+             "depthnormals.torch 3f2n+ (backend auto: numba on a CPU tensor)":
+                 lambda: dt.estimate_normals(zt, Kt, method="3f2n+"),
+             "depthnormals.torch 3f2n+ (backend torch, eager)":
+                 lambda: dt.estimate_normals(zt, Kt, method="3f2n+", backend="torch")}
     compile_s = None
     with torch.no_grad():
         if compile_:
-            fc = torch.compile(lambda d: dt.estimate_normals(d, Kt, method="3f2n+"))
+            fc = torch.compile(lambda d: dt.estimate_normals(d, Kt, method="3f2n+", backend="torch"))
             t0 = time.perf_counter()
             fc(zt)
             compile_s = time.perf_counter() - t0
-            cases["torch 3f2n+ (torch.compile)"] = lambda: fc(zt)
+            cases["depthnormals.torch 3f2n+ (backend torch, torch.compile)"] = lambda: fc(zt)
         times = _interleaved(cases, repeats, warmups=1)
     ref = statistics.median(times["kornia depth_to_normals"])
     h, w = z.shape

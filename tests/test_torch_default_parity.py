@@ -201,3 +201,25 @@ def test_gradcheck_on_the_box_fit():
     assert dn.noise_profile(z[0, 0].numpy(), K).branch == "box-fit"
     f = lambda d: dt.estimate_normals(d, K)  # noqa: E731
     assert torch.autograd.gradcheck(f, (z.requires_grad_(True),), eps=1e-7, atol=1e-5, rtol=1e-4)
+
+
+def test_uncertainty_tensor():
+    """``return_uncertainty=True``: a (B, 1, H, W) float32 map per frame equal to the numba
+    library's, NaN exactly where the normal is NaN (0 with ``invalid="zero"``), for either
+    backend; other methods refused."""
+    rng = np.random.default_rng(5)
+    depths = [dict(FRAMES)[k].copy() for k in ("box-on-floor gaussian", "demo-room kinect_v1")]
+    for d in depths:
+        d[rng.random(d.shape) < 0.03] = 0.0
+    z = torch.from_numpy(np.stack(depths))[:, None]
+    for backend in ("auto", "torch"):
+        n, u = dt.estimate_normals(z, K_SMALL, return_uncertainty=True, backend=backend)
+        assert u.shape == (2, 1, 120, 160) and u.dtype == torch.float32
+        assert torch.equal(torch.isnan(u[:, 0]), torch.isnan(n).any(1))
+        for i, d in enumerate(depths):
+            ref = dn.estimate_normals(d, K_SMALL, return_uncertainty=True)[1]
+            assert np.array_equal(u[i, 0].numpy(), ref, equal_nan=True)
+    nz, uz = dt.estimate_normals(z, K_SMALL, return_uncertainty=True, invalid="zero")
+    assert torch.equal(uz == 0, (nz == 0).all(1, keepdim=True)) and not torch.isnan(uz).any()
+    with pytest.raises(ValueError, match="3f2n\\+"):
+        dt.estimate_normals(z, K_SMALL, method="d2nt+", return_uncertainty=True)

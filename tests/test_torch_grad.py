@@ -93,7 +93,7 @@ def test_torch_compile_cpu():
     ~100 s on the shared 2-core machine; inductor itself raises a DeprecationWarning inside
     torch.jit, ignored here)."""
     z = torch.rand(2, 1, 12, 16) + 1.0
-    f = torch.compile(lambda d: dt.estimate_normals(d, (20.0, 20.0, 7.5, 5.5), method="3f2n", backend="torch"),
-                      fullgraph=True)
+    K = (20.0, 20.0, 7.5, 5.5)
+    f = torch.compile(lambda d: dt.estimate_normals(d, K, method="3f2n", backend="torch"), fullgraph=True)
     torch.testing.assert_close(f(z), dt.estimate_normals(z, (20.0, 20.0, 7.5, 5.5), method="3f2n"),
                                equal_nan=True, atol=1e-5, rtol=1e-5)

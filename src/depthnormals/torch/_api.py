@@ -176,7 +176,8 @@ def _pad(base: str, o: dict[str, Any], refined: bool) -> int:
 
 def estimate_normals(depth: torch.Tensor, K: Any, *, method: str = "3f2n+",
                      depth_scale: float | None = None, invalid: str = "nan",
-                     backend: str = "auto", **options: Any) -> torch.Tensor:
+                     backend: str = "auto", return_uncertainty: bool = False,
+                     **options: Any) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
     """Surface normals of a batch of depth images, in torch: batched, differentiable, on the
     device of the input.
 
@@ -196,18 +197,31 @@ def estimate_normals(depth: torch.Tensor, K: Any, *, method: str = "3f2n+",
     invalid : {"nan", "zero"}, default "nan"
         What pixels without an estimate hold: NaN (the library's convention) or the zero
         vector (safe to feed a network). :func:`normals_mask` recovers the mask from either.
+    backend : {"auto", "torch", "numba"}, default "auto"
+        Where the normals are computed. ``"torch"``: this package's implementation (any
+        device, differentiable). ``"numba"``: the numba library, frame by frame on the CPU
+        (the same bits as :func:`depthnormals.estimate_normals`; no gradient; a CUDA tensor
+        is copied to the host and back). ``"auto"``: numba for a CPU tensor when no gradient
+        is asked for (it is 5-40x faster there and gives the same answer), torch otherwise.
+    return_uncertainty : bool, default False
+        Also return the expected angular error of every normal (degrees; the numba library's
+        map, :mod:`depthnormals.ddm.uncertainty`, computed on the host from the same depth:
+        it carries no gradient), as a (B, 1, H, W) float32 tensor on the depth's device, NaN
+        (0 with ``invalid="zero"``) exactly where the normal has none. For ``"3f2n+"`` with
+        its default module options; anything else raises ValueError.
     **options
         The options of the numba estimator of the same name, with the same defaults
         (:func:`method_defaults`): ``kernel``, ``kernel_size``, ``aggregate`` (3F2N),
         ``variant`` (D2NT) and, for ``"<name>+"``, those of
         :func:`depthnormals.discontinuity_discrimination` with ``selection`` one of
-        ``"auto"``, ``"planes"``, ``"curvature"`` (``"plane-fit"`` and ``"box-fit"`` raise
+        ``"auto"``, ``"box-fit"``, ``"planes"``, ``"curvature"`` (``"plane-fit"`` raises
         ValueError). Module defaults: the numba module's, except
-        :data:`TORCH_MODULE_DEFAULTS` (``consistency=0.0``). ``selection="auto"`` is here
-        the clean branch of the numba default: the plane hypotheses (or, with the CRF or a
-        correlation, the curvature selection at margin 0), so the same normals as the numba
-        default on clean depth; on noisy depth (noise >= 0.001 pixel footprints,
-        :func:`depthnormals.estimate_noise`) the numba default is the box-fit, not this.
+        :data:`TORCH_MODULE_DEFAULTS` (``consistency=0.0``, which only an explicit
+        ``selection="curvature"`` reads). ``selection="auto"`` is the numba default's rule,
+        frame by frame: the noise estimate, then the plane hypotheses on clean depth, the
+        box-fit of independent noise or the measured support of real sensor depth
+        (docs/3f2n-plus.md), with the same normals (float64 parity <= 1e-6 deg mean on
+        analytic, synthetic-sensor and real frames: tests/test_torch_default_parity.py).
 
     Returns
     -------
@@ -216,15 +230,24 @@ def estimate_normals(depth: torch.Tensor, K: Any, *, method: str = "3f2n+",
         camera (``dot(n, X) < 0``: a fronto-parallel wall gives (0, 0, -1)); NaN (or 0) where
         no estimate exists. dtype: that of a floating input (float16/bfloat16 computed in
         float32 and rounded), float32 for integer depth.
+    uncertainty : Tensor, shape (B, 1, H, W), float32
+        Only with ``return_uncertainty=True``: the expected angular error, degrees.
 
     Notes
     -----
     Same results as :func:`depthnormals.estimate_normals` up to float32 rounding (parity
     tests: <= 0.01 deg mean, <= 0.1 deg at the 99.9th percentile). Differentiable with
     respect to depth (and tensor intrinsics); the selections (median, DAG switch, curvature
-    selection, CRF) are piecewise, so the gradient flows through the chosen candidate, and it
-    is finite wherever the output is. No host synchronisation: the call can be captured by
-    ``torch.compile`` and runs asynchronously on a GPU.
+    selection, CRF, the plane hypotheses, the choice of box-fit window) are piecewise, so the
+    gradient flows through the chosen candidate (for the box-fit: the chosen window's
+    least-squares plane; from radius 6 the measured support fits every second row and column,
+    so only those pixels get a gradient), and it is finite wherever the output is.
+
+    Host synchronisation: none for the estimators and an explicit ``selection``; the default
+    ``selection="auto"`` reads each frame's noise level on the host once (a few numbers per
+    frame) to choose its branch, and once more for the support profile when a frame is
+    noisy, so a ``torch.compile``'d call breaks its graph there (measured on an H200:
+    compiled default 18,300 frames/s at batch 64, docs/torch.md).
 
     Examples
     --------
@@ -239,8 +262,22 @@ def estimate_normals(depth: torch.Tensor, K: Any, *, method: str = "3f2n+",
         raise ValueError(f"invalid must be 'nan' or 'zero'; got {invalid!r}")
     if not isinstance(backend, str) or backend not in BACKENDS:
         raise ValueError(f"backend must be one of {', '.join(BACKENDS)}; got {backend!r}")
+    if not isinstance(return_uncertainty, bool):
+        raise TypeError(f"return_uncertainty must be True or False; got {return_uncertainty!r}")
     o = _check_options(method, options)
     z, valid, cam, out_dtype = prepare(depth, K, depth_scale)
+    if return_uncertainty:
+        if method != "3f2n+":
+            raise ValueError(f"return_uncertainty=True needs method '3f2n+' in depthnormals.torch; got "
+                             f"{method!r} (the numba library also maps fals and PCL's modes)")
+        n, unc = _numba_backend(depth, K, method, depth_scale, invalid, options, out_dtype, True)
+        if not (backend == "numba" or (backend == "auto" and _numba_suits(depth, K))):
+            n = estimate_normals(depth, K, method=method, depth_scale=depth_scale, invalid=invalid,
+                                 backend="torch", **options)
+        dev = depth.device
+        unc = unc.to(dev)
+        none = unc.new_tensor(float("nan") if invalid == "nan" else 0.0)
+        return n.to(dev), torch.where(normals_mask(n), unc, none)
     if backend == "numba" or (backend == "auto" and _numba_suits(depth, K)):
         return _numba_backend(depth, K, method, depth_scale, invalid, options, out_dtype)
     plus = method.endswith("+")
@@ -325,14 +362,15 @@ def _numba_suits(depth: torch.Tensor, K: Any) -> bool:
 
 
 def _numba_backend(depth, K, method: str, depth_scale, invalid: str, options: dict[str, Any],
-                   out_dtype: torch.dtype) -> torch.Tensor:
+                   out_dtype: torch.dtype, uncertainty: bool = False):
     """Every frame through :func:`depthnormals.estimate_normals` (same method and options, the
-    torch defaults where they differ): (B, 3, H, W) on the CPU in ``out_dtype``."""
+    torch defaults where they differ): (B, 3, H, W) on the CPU in ``out_dtype``; with
+    ``uncertainty`` also the expected-error maps (B, 1, H, W) float32 (``return_uncertainty``)."""
     import numpy as np
 
     import depthnormals as dn
 
-    d = depth.detach()
+    d = depth.detach().cpu()
     if d.ndim == 4:
         d = d[:, 0]
     if d.dtype in (torch.float16, torch.bfloat16):
@@ -346,14 +384,21 @@ def _numba_backend(depth, K, method: str, depth_scale, invalid: str, options: di
     else:
         Ks = [K] * b
     opts = dict(options)
-    if method.endswith("+"):
+    if method.endswith("+") and not uncertainty:  # (the map takes the default options only)
         for name, value in TORCH_MODULE_DEFAULTS.items():
             opts.setdefault(name, value)
-    out = np.stack([dn.estimate_normals(arr[i], Ks[i], method=method, depth_scale=depth_scale, **opts)
-                    for i in range(b)])
+    if uncertainty:
+        pairs = [dn.estimate_normals(arr[i], Ks[i], method=method, depth_scale=depth_scale,
+                                     return_uncertainty=True, **opts) for i in range(b)]
+        out = np.stack([p[0] for p in pairs])
+        unc = torch.from_numpy(np.stack([p[1] for p in pairs]))[:, None]
+    else:
+        out = np.stack([dn.estimate_normals(arr[i], Ks[i], method=method, depth_scale=depth_scale, **opts)
+                        for i in range(b)])
     if invalid == "zero":
         out = np.where(np.isnan(out), np.float32(0.0), out)
-    return torch.from_numpy(out).permute(0, 3, 1, 2).to(out_dtype)
+    n = torch.from_numpy(out).permute(0, 3, 1, 2).to(out_dtype)
+    return (n, unc) if uncertainty else n
 
 
 def normals_mask(normals: torch.Tensor) -> torch.Tensor:
