@@ -12,9 +12,10 @@ the gradient of the depth they came from (a piecewise selection).
 from __future__ import annotations
 
 import torch
+import torch.nn.functional as F
 
 from ..ddm.planes import CENTRE_WEIGHT, ITERATIONS, LAPLACE_WEIGHT
-from ._common import Camera, Grid, oriented, shift
+from ._common import Camera, Grid, oriented
 
 __all__ = ["plane_select"]
 
@@ -68,14 +69,21 @@ def plane_select(grid: Grid, cam: Camera, ok: torch.Tensor, iterations: int = IT
     with torch.no_grad():
         best = best * (cam.fx / p)  # footprints
     cval = wp
+    h, w = wp.shape[-2:]
     for _ in range(iterations):
         nbest, na, nb, nc = best, a, b, cval
+        # each map padded once per pass; every offer reads a view of it (one copy, not eight)
+        pa_ = F.pad(a, (1, 1, 1, 1), value=0.0)
+        pb_ = F.pad(b, (1, 1, 1, 1), value=0.0)
+        pc_ = F.pad(cval, (1, 1, 1, 1), value=1.0)
+        with torch.no_grad():
+            ps_ = F.pad(best, (1, 1, 1, 1), value=float("inf"))
         for dv, du in _OFFERS:
-            aq = shift(a, dv, du, 0.0)
-            bq = shift(b, dv, du, 0.0)
-            pred = shift(cval, dv, du, 1.0) - aq * du - bq * dv
+            aq = pa_[:, 1 + dv:1 + dv + h, 1 + du:1 + du + w]
+            bq = pb_[:, 1 + dv:1 + dv + h, 1 + du:1 + du + w]
+            pred = pc_[:, 1 + dv:1 + dv + h, 1 + du:1 + du + w] - aq * du - bq * dv
             with torch.no_grad():
-                s = (1.0 - pred.detach() * zd).abs() * cam.fx + shift(best, dv, du, float("inf"))
+                s = (1.0 - pred.detach() * zd).abs() * cam.fx + ps_[:, 1 + dv:1 + dv + h, 1 + du:1 + du + w]
                 take = (s < nbest) & grid.valid
                 nbest = torch.where(take, s, nbest)
             na = torch.where(take, aq, na)
