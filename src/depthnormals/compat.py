@@ -12,8 +12,8 @@ where no normal exists.
 - :func:`depth_normal` replaces FFB6D's ``normalSpeed.depth_normal`` (numpy only).
 
 The torch drop-ins call :func:`depthnormals.torch.estimate_normals` (imported when called, so
-``import depthnormals.compat`` does not import torch); on noisy sensor depth its default is
-the clean-depth branch of the numba default, not the numba default itself (docs/torch.md).
+``import depthnormals.compat`` does not import torch), whose default is the numba default on
+every kind of depth, noisy and quantised sensor depth included (docs/torch.md).
 :func:`depth_normal` calls the numba default :func:`depthnormals.estimate_normals`.
 The conventions of each original were read from its source (named in each docstring) and are
 pinned by ``tests/test_compat.py``.

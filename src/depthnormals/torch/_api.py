@@ -62,9 +62,8 @@ def _read_defaults() -> dict[str, dict[str, Any]]:
 #: Where the torch module's defaults differ from the numba module's: the margin of an
 #: explicit ``selection="curvature"`` (0 here, 0.1 in numba; the torch default was the
 #: curvature selection at margin 0 until session 6). ``selection="auto"`` (the default of
-#: both) is, in torch, the clean branch of the numba default only (there is no noise
-#: estimate and no box-fit here): the plane hypotheses, or with the CRF or a correlation the
-#: curvature selection at margin 0; equal to the numba default on clean depth.
+#: both) is the same rule in both (noise estimate, then the plane hypotheses, the box-fit or
+#: the measured support), whose clean branch with the CRF or a correlation uses margin 0.
 TORCH_MODULE_DEFAULTS = {"consistency": 0.0}
 
 
@@ -74,8 +73,7 @@ _DEFAULTS = _read_defaults()
 def method_defaults(method: str) -> dict[str, Any]:
     """The options of ``method`` and their defaults: those of the numba library, read from
     its signatures (so the torch path follows when they change), except the module's
-    ``consistency`` (:data:`TORCH_MODULE_DEFAULTS`); ``selection="auto"`` is, in torch, the
-    clean branch of the numba default (no noise estimate here).
+    ``consistency`` (:data:`TORCH_MODULE_DEFAULTS`).
 
     Examples
     --------
