@@ -58,27 +58,50 @@ class Fits:
         return fx * self.a, fy * self.b, self.c - self.a * au - self.b * bv
 
 
+def _box(x: torch.Tensor, r: int, dim: int) -> torch.Tensor:
+    """Sums of ``x`` over ``[i - r, i + r]`` along ``dim`` (-1 or -2), zero outside: a
+    cumulative sum along that one axis (rows of W, or columns of H, so its partial sums stay
+    small) and one difference."""
+    n = x.shape[dim]
+    pad = (r + 1, r) if dim == -1 else (0, 0, r + 1, r)
+    c = torch.cumsum(F.pad(x, pad), dim=dim)
+    return c.narrow(dim, 2 * r + 1, n) - c.narrow(dim, 0, n)
+
+
 def _sums(x: torch.Tensor, m: torch.Tensor, r: int) -> list[torch.Tensor]:
     """The ten window sums (count, du, dv, du^2, du dv, dv^2, w, du w, dv w, w^2) of every
     pixel's ``(2 r + 1)^2`` window, float64 (B, H, W) each; ``x`` is ``1 / z`` (0 at invalid
-    pixels), ``m`` the validity as 0 / 1."""
-    k = torch.arange(-r, r + 1, dtype=x.dtype, device=x.device)
-    one = torch.ones_like(k)
-    zero = torch.zeros_like(k)
-    # row pass: channels (m, x, x^2) -> (m, du m, du^2 m, x, du x, x^2)
-    wr = torch.stack([torch.stack([one, zero, zero]), torch.stack([k, zero, zero]),
-                      torch.stack([k * k, zero, zero]), torch.stack([zero, one, zero]),
-                      torch.stack([zero, k, zero]), torch.stack([zero, zero, one])])
-    inp = torch.stack((m, x, x * x), dim=1)
-    rs = F.conv2d(inp, wr[:, :, None, :], padding=(0, r))
-    # column pass: the six plain sums, then dv m, dv (du m), dv x, dv^2 m
-    eye = torch.eye(6, dtype=x.dtype, device=x.device)
-    cols = [eye[i][:, None] * one[None, :] for i in range(6)]
-    for src, wt in ((0, k), (1, k), (3, k), (0, k * k)):
-        cols.append(eye[src][:, None] * wt[None, :])
-    wc = torch.stack(cols)  # (10, 6, 2r+1)
-    t = F.conv2d(rs, wc[:, :, :, None], padding=(r, 0))
-    n, su, suu, sw, suw, sww, sv, suv, svw, svv = t.unbind(1)
+    pixels), ``m`` the validity as 0 / 1.
+
+    Separable: a row pass (six sums over du), then a column pass (ten over dv), each a
+    cumulative sum along its own axis. Moments in the window's own offsets come from those in
+    image coordinates (``sum du x = sum u' x - u sum x``): exact for the counts (integers
+    below 2^53), rounding ~1e-16 of the row's or column's partial sums for the depth terms
+    (the numba kernels' running sums round alike; tests/test_torch_default_parity.py)."""
+    h, w = x.shape[-2:]
+    u = torch.arange(w, dtype=x.dtype, device=x.device).reshape(1, 1, w)
+    v = torch.arange(h, dtype=x.dtype, device=x.device).reshape(1, h, 1)
+    # row pass
+    n0 = _box(m, r, -1)
+    s1 = _box(m * u, r, -1)
+    s2 = _box(m * (u * u), r, -1)
+    rw = _box(x, r, -1)
+    ruw = _box(x * u, r, -1) - u * rw
+    rww = _box(x * x, r, -1)
+    ru = s1 - u * n0
+    ruu = s2 - 2.0 * u * s1 + (u * u) * n0
+    # column pass
+    n = _box(n0, r, -2)
+    su = _box(ru, r, -2)
+    suu = _box(ruu, r, -2)
+    sw = _box(rw, r, -2)
+    suw = _box(ruw, r, -2)
+    sww = _box(rww, r, -2)
+    vn = _box(v * n0, r, -2)
+    sv = vn - v * n
+    svv = _box((v * v) * n0, r, -2) - 2.0 * v * vn + (v * v) * n
+    suv = _box(v * ru, r, -2) - v * su
+    svw = _box(v * rw, r, -2) - v * sw
     return [n, su, sv, suu, suv, svv, sw, suw, svw, sww]
 
 
