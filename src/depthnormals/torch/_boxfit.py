@@ -5,10 +5,11 @@ The same rules, constants and order of decisions as :mod:`depthnormals.ddm.boxfi
 :func:`depthnormals.ddm.support.support_select` (the measured support of real sensors); read
 them for the method (ours, not the paper's).
 
-The ten window sums of every pixel are two separable convolutions in float64 (a row pass of
-the count, ``1 / z`` and ``1 / z^2`` against ``1, du, du^2``, then a column pass against
-``1, dv, dv^2``): direct sums, so their rounding is that of the numba running sums' order of
-magnitude, and nothing loops over windows. The planes are solved for every pixel at once
+The ten window sums of every pixel are separable, in float64: a row pass (the count, ``1 / z``
+and ``1 / z^2`` against ``1, du, du^2``), then a column pass (against ``1, dv, dv^2``), each a
+cumulative sum along its own axis (:func:`_sums`): nothing loops over windows, and the
+partial sums stay within one row or column, so their rounding is of the order of the numba
+running sums'. The planes are solved for every pixel at once
 (the adjugate of the 3x3 normal equations). What the numba kernels store in float32 and
 compare (residual variances, planes, gates) is rounded to float32 here before it is compared,
 so both libraries take the same decisions; the normals themselves are computed in float64
