@@ -75,3 +75,14 @@ def _rough_sphere(seed: int, sigma: float):
     z[rng.random(z.shape) < 0.03] = 0.0
     z[40:47, 60:70] = 0.0
     return z
+
+
+@pytest.fixture
+def two_threads():
+    """The library's threads set to 2 for the test (batches spread over threads), then back."""
+    import depthnormals as dn
+
+    old = dn.get_num_threads()
+    dn.set_num_threads(2)
+    yield
+    dn.set_num_threads(old)

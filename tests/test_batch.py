@@ -28,14 +28,6 @@ def stack(rough_sphere):
     return np.stack(frames)
 
 
-@pytest.fixture
-def two_threads():
-    old = dn.get_num_threads()
-    dn.set_num_threads(2)
-    yield
-    dn.set_num_threads(old)
-
-
 def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
     return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
 

@@ -21,14 +21,6 @@ def stack(rough_sphere):
     return np.stack([clean, noisy, quantised]).astype(np.float32)
 
 
-@pytest.fixture
-def two_threads():
-    old = dn.get_num_threads()
-    dn.set_num_threads(2)
-    yield
-    dn.set_num_threads(old)
-
-
 @pytest.mark.parametrize("method", ["3f2n+", "fals", "pcl-covariance-matrix"])
 def test_stack_equals_single_calls(stack, method, two_threads):
     n, u = dn.estimate_normals(stack, ROUGH_K, method=method, return_uncertainty=True)

@@ -27,12 +27,16 @@ import torch
 import torch.nn.functional as F
 
 from ..ddm.boxfit import LOCAL_CAP, MIN_POINTS, SHIFTS
+from ..kernels.eig3 import sym3_adjugate_apply
 from ._common import shift as _at
 
 __all__ = ["Fits", "box_fits", "choose_least", "choose_local", "choose_plain", "keep_estimator",
            "upsample_half"]
 
 _SHIFTS = [tuple(int(x) for x in s) for s in SHIFTS]  # (dv, du), the centred window first
+#: the numba kernel's adjugate of the normal equations, its Python body run on tensors (the same
+#: formula, elementwise; read once here, so torch.compile traces a plain function)
+_ADJUGATE = sym3_adjugate_apply.py_func
 
 
 def _f32(x: torch.Tensor) -> torch.Tensor:
@@ -108,16 +112,7 @@ def _sums(x: torch.Tensor, m: torch.Tensor, r: int) -> list[torch.Tensor]:
 
 def _solve(n, su, sv, suu, suv, svv, sw, suw, svw, sww):
     """:func:`depthnormals.ddm.boxfit.solve_window` elementwise: (a, b, c, rss, ok)."""
-    c00 = svv * n - sv * sv
-    c01 = su * sv - suv * n
-    c02 = suv * sv - su * svv
-    c11 = suu * n - su * su
-    c12 = suv * su - suu * sv
-    c22 = suu * svv - suv * suv
-    x = c00 * suw + c01 * svw + c02 * sw
-    y = c01 * suw + c11 * svw + c12 * sw
-    t = c02 * suw + c12 * svw + c22 * sw
-    det = suu * c00 + suv * c01 + su * c02
+    x, y, t, det = _ADJUGATE(suu, suv, su, svv, sv, n, suw, svw, sw)
     ok = (n >= MIN_POINTS) & (det > 1e-9 * n * n * n)
     inv = 1.0 / torch.where(ok, det, torch.ones_like(det))
     a, b, c = x * inv, y * inv, t * inv
@@ -185,6 +180,19 @@ def _plane_normal(a, b, c, dvs, dus, cam):
     return fx * a, fy * b, c - a * (u + dus - cx) - b * (v + dvs - cy)
 
 
+def _chosen(fits: Fits, big: Fits | None, kbest, found, take_big, valid, shift: int, cam):
+    """The normal of each pixel's chosen window ``kbest`` (index into SHIFTS; none where not
+    ``found``), the large window's where ``take_big``; (nx, ny, nz, ok) facing the camera."""
+    a, b, c, dvs, dus = _gather_plane(fits, kbest, shift)
+    nx, ny, nz = _plane_normal(a, b, c, dvs, dus, cam)
+    ok = valid & found
+    if big is not None:
+        bx, by, bz = big.normal()
+        nx, ny, nz = (torch.where(take_big, q, p) for p, q in ((nx, bx), (ny, by), (nz, bz)))
+        ok = torch.where(take_big, big.good, ok)
+    return _ray_facing(nx, ny, nz, cam, ok)
+
+
 def choose_local(zs, valid, fits: Fits, big: Fits | None, shift: int, gate: torch.Tensor,
                  big_gate: torch.Tensor, inv_var: torch.Tensor, scale: torch.Tensor, cam):
     """:func:`depthnormals.ddm.boxfit._choose_local_rows` for a batch: the large window where
@@ -227,14 +235,7 @@ def choose_local(zs, valid, fits: Fits, big: Fits | None, shift: int, gate: torc
             kbest = torch.where(take, i, kbest)
         kbest = torch.where(centred, 0, kbest)
         found = centred | (best < float("inf"))
-    a, b, c, dvs, dus = _gather_plane(fits, kbest, shift)
-    nx, ny, nz = _plane_normal(a, b, c, dvs, dus, cam)
-    ok = valid & found
-    if big is not None:
-        bx, by, bz = big.normal()
-        nx, ny, nz = (torch.where(take_big, q, p) for p, q in ((nx, bx), (ny, by), (nz, bz)))
-        ok = torch.where(take_big, big.good, ok)
-    return _ray_facing(nx, ny, nz, cam, ok)
+    return _chosen(fits, big, kbest, found, take_big, valid, shift, cam)
 
 
 def choose_plain(valid, fits: Fits, big: Fits | None, shift: int, gate: float, big_gate: float,
@@ -254,14 +255,7 @@ def choose_plain(valid, fits: Fits, big: Fits | None, shift: int, gate: float, b
             kbest = torch.where(take, i, kbest)
         found = best < float("inf")
         take_big = valid & (big.score <= big_gate) if big is not None else torch.zeros_like(valid)
-    a, b, c, dvs, dus = _gather_plane(fits, kbest, shift)
-    nx, ny, nz = _plane_normal(a, b, c, dvs, dus, cam)
-    ok = valid & found
-    if big is not None:
-        bx, by, bz = big.normal()
-        nx, ny, nz = (torch.where(take_big, q, p) for p, q in ((nx, bx), (ny, by), (nz, bz)))
-        ok = torch.where(take_big, big.good, ok)
-    return _ray_facing(nx, ny, nz, cam, ok)
+    return _chosen(fits, big, kbest, found, take_big, valid, shift, cam)
 
 
 def _growth(zs: torch.Tensor, zref: torch.Tensor, half: torch.Tensor) -> torch.Tensor:
