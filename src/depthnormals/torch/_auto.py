@@ -38,11 +38,12 @@ from ._support import support_profiles
 __all__ = ["noisy_frames", "noisy_select"]
 
 
-def noisy_frames(z64: torch.Tensor, cam64, o: dict) -> tuple[BatchNoise, list[int]]:
-    """The noise pass of every frame and the frames that take a noisy branch."""
-    noise = noise_pass(z64, cam64[0], cam64[1], tile=TILE)
+def noisy_frames(z: torch.Tensor, valid: torch.Tensor, cam64, o: dict) -> tuple[BatchNoise, list[int]]:
+    """The noise pass of every frame (depth ``z``, valid where ``valid``) and the frames that
+    take a noisy branch."""
+    noise = noise_pass(z, valid, cam64[0], cam64[1], tile=TILE)
     if o["selection"] == "box-fit":
-        return noise, list(range(z64.shape[0]))
+        return noise, list(range(z.shape[0]))
     paper = o["crf"] or o["correlation"] != "none"
     thr = NOISE_CLEAN if paper else PLANES_NOISE
     return noise, [i for i, f in enumerate(noise.frames) if f.sigma >= thr]  # NaN: clean

@@ -77,19 +77,20 @@ class _Samples:
     float64 and ``ok`` where a sample exists (ddm.noise._tile_samples' samples, the same
     multiset per tile)."""
 
-    def __init__(self, z: torch.Tensor, fx: torch.Tensor, fy: torch.Tensor, tile: int):
+    def __init__(self, z: torch.Tensor, valid: torch.Tensor, fx: torch.Tensor, fy: torch.Tensor,
+                 tile: int):
         b, h, w = z.shape
         dev = z.device
         ty, tx = (h + tile - 1) // tile, (w + tile - 1) // tile
         rows, per = _tile_rows(h, tile)
         nr = len(rows)
         if nr == 0 or w < 3:
-            self.x = torch.zeros((b, ty, tx, 1), dtype=z.dtype, device=dev)
+            self.x = torch.zeros((b, ty, tx, 1), dtype=torch.float64, device=dev)
             self.ok = torch.zeros((b, ty, tx, 1), dtype=torch.bool, device=dev)
             return
         rv = torch.tensor(rows, device=dev)
         # horizontal triples at every column 1 .. w - 2 of the sampled rows
-        zr = z[:, rv]  # (B, R, W)
+        zr = _nan64(z[:, rv], valid[:, rv])  # (B, R, W)
         xh, okh = _second(zr[:, :, :-2], zr[:, :, 1:-1], zr[:, :, 2:], fx)
         pad = tx * tile - w
         xh = torch.nn.functional.pad(xh, (1, pad + 1))
@@ -104,7 +105,7 @@ class _Samples:
             cper.append(mine)
         rows_t = _padded_index(per, nr).to(dev)  # (TY, r) into the rows (nr: missing)
         cv = torch.tensor(cols if cols else [0], device=dev)
-        zc = z[:, :, cv]  # (B, H, C)
+        zc = _nan64(z[:, :, cv], valid[:, :, cv])  # (B, H, C)
         xv, okv = _second(zc[:, rv - 1], zc[:, rv], zc[:, rv + 1], fy)  # (B, R, C)
         if not cols:
             okv = torch.zeros_like(okv)
@@ -123,14 +124,21 @@ class _Samples:
         self.ok = torch.cat((ho, vo), dim=-1)
 
 
-def _plateaus(z: torch.Tensor, fx: torch.Tensor, fy: torch.Tensor):
-    """The plateau search of ddm.noise (``_plateau_samples``) on every frame: (tested, zero,
-    steps, step_ok) with steps (B, N) float64."""
+def _nan64(z: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+    """``z`` in float64 with NaN where not ``valid`` (the numba pass's prepared depth), for
+    the sampled rows and columns only."""
+    return torch.where(valid, z.to(torch.float64), float("nan"))
+
+
+def _plateaus(z: torch.Tensor, valid: torch.Tensor, fx: torch.Tensor, fy: torch.Tensor):
+    """The plateau search of ddm.noise (``_plateau_samples``) on every frame: (steps,
+    step_ok) with steps (B, N) float64."""
     span, edge = QUANT_SPAN, QUANT_EDGE
     b = z.shape[0]
     parts = []
-    for lines, f in ((z[:, QUANT_STRIDE // 2::QUANT_STRIDE, :], fx),
-                     (z[:, :, QUANT_STRIDE // 2::QUANT_STRIDE].transpose(1, 2), fy)):
+    k = slice(QUANT_STRIDE // 2, None, QUANT_STRIDE)
+    for lines, f in ((_nan64(z[:, k, :], valid[:, k, :]), fx),
+                     (_nan64(z[:, :, k], valid[:, :, k]).transpose(1, 2), fy)):
         n = lines.shape[-1]
         if n <= 2 * span or lines.shape[1] == 0:
             continue
@@ -147,7 +155,7 @@ def _plateaus(z: torch.Tensor, fx: torch.Tensor, fy: torch.Tensor):
         ok = ok & (step < edge)
         parts.append((step.reshape(b, -1), ok.reshape(b, -1)))
     if not parts:
-        zero = torch.zeros((b, 1), dtype=z.dtype, device=z.device)
+        zero = torch.zeros((b, 1), dtype=torch.float64, device=z.device)
         return zero, zero.bool()
     return torch.cat([p[0] for p in parts], 1), torch.cat([p[1] for p in parts], 1)
 
@@ -176,27 +184,30 @@ class BatchNoise:
         return torch.where(q > 0.0, torch.hypot(lev, q), lev)
 
 
-def noise_pass(z: torch.Tensor, fx: torch.Tensor, fy: torch.Tensor, *, tile: int = TILE) -> BatchNoise:
-    """The noise of every frame of prepared depth ``z`` (B, H, W) float64, NaN at invalid
-    pixels; ``fx``, ``fy`` (B or 1, 1, 1). One host transfer of four numbers per frame."""
+def noise_pass(z: torch.Tensor, valid: torch.Tensor, fx: torch.Tensor, fy: torch.Tensor, *,
+               tile: int = TILE) -> BatchNoise:
+    """The noise of every frame of depth ``z`` (B, H, W), valid where ``valid``; ``fx``, ``fy``
+    (B or 1, 1, 1). The sampled rows and columns are read in float64 (as the numba pass reads
+    its prepared depth). One host transfer of six numbers per frame."""
     with torch.no_grad():
         b, h, w = z.shape
-        fxb = fx.reshape(-1, 1, 1, 1).to(z.dtype)
-        fyb = fy.reshape(-1, 1, 1, 1).to(z.dtype)
-        samples = _Samples(z, fxb[:, 0], fyb[:, 0], tile)
+        fxb = fx.reshape(-1, 1, 1, 1).to(torch.float64)
+        fyb = fy.reshape(-1, 1, 1, 1).to(torch.float64)
+        samples = _Samples(z, valid, fxb[:, 0], fyb[:, 0], tile)
         x = samples.x.reshape(b, -1)
         ok = samples.ok.reshape(b, -1)
         n = ok.sum(-1)
         iid_kth = _kth_present(x, ok, n // 2)
-        steps, sok = _plateaus(z, fxb.reshape(-1), fyb.reshape(-1))
+        steps, sok = _plateaus(z, valid, fxb.reshape(-1), fyb.reshape(-1))
         tested = sok.sum(-1)
         zero_ok = sok & (steps == 0.0)
         zero = zero_ok.sum(-1)
         nz_ok = sok & (steps != 0.0)
         nn = nz_ok.sum(-1)
         step_kth = _kth_present(steps, nz_ok, nn // 2)
-        host = torch.stack([iid_kth, n.to(z.dtype), tested.to(z.dtype), zero.to(z.dtype),
-                            nn.to(z.dtype), step_kth], 1).cpu().tolist()
+        f64 = torch.float64
+        host = torch.stack([iid_kth, n.to(f64), tested.to(f64), zero.to(f64), nn.to(f64), step_kth],
+                           1).cpu().tolist()
     frames = []
     for kth, cnt, tst, zr, nnz, skth in host:
         iid = kth / (_MAD * _SQRT6) if cnt > 0 else float("nan")
