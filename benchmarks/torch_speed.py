@@ -209,15 +209,27 @@ def run_gpu(z: np.ndarray, K: np.ndarray, device: str, batch: int, reps: int, co
         if compile_:
             f = torch.compile(lambda d, m=m: dt.estimate_normals(d, Kt, method=m))
             cases[f"torch {m} (torch.compile)"] = lambda f=f: f(zt)
-    # the default on sensor-like depth: its noisy branches (independent noise: the box-fit;
-    # quantised disparity: the measured support)
+    # the default on sensor-like depth: its noisy branches (independent noise on this frame:
+    # the box-fit; the analytic demo room at 640x480 with the kinect_v1 model: the measured
+    # support, radius 16); each checked to take that branch
+    from depthnormals.analytic import make_scene
+    from depthnormals.synth.noise import kinect_v1_noise
+
     rng = np.random.default_rng(0)
     noisy = (z + rng.normal(size=z.shape) * 0.3 * z / K[0, 0]).astype(np.float32)
-    quant = np.where(z > 0, 580 * 0.075 / (np.round(580 * 0.075 / np.where(z > 0, z, 1) * 8) / 8), 0)
-    for label, d in (("gaussian noise 0.3 px: box-fit", noisy), ("quantised disparity: measured support",
-                                                                  quant.astype(np.float32))):
+    room = make_scene("demo-room").render()
+    kinect = np.asarray(kinect_v1_noise(room.depth, room.normals, room.K, rng=np.random.default_rng(1)),
+                        dtype=np.float32)
+    for label, d, k, branch in (("gaussian noise 0.3 px: box-fit", noisy, K, "box-fit"),
+                                ("demo room, kinect_v1 model: measured support", kinect,
+                                 np.asarray(room.K.matrix), "measured-support")):
+        assert dn.noise_profile(d, k).branch == branch, (label, dn.noise_profile(d, k).branch)
         dd = torch.from_numpy(d)[None, None].repeat(batch, 1, 1, 1).to(dev)
-        cases[f"torch 3f2n+ ({label})"] = lambda dd=dd: dt.estimate_normals(dd, Kt)
+        kt = torch.from_numpy(k.astype(np.float32)).to(dev)
+        cases[f"torch 3f2n+ ({label})"] = lambda dd=dd, kt=kt: dt.estimate_normals(dd, kt)
+        if compile_:
+            fn = torch.compile(lambda x, kt=kt: dt.estimate_normals(x, kt))
+            cases[f"torch 3f2n+ ({label}, torch.compile)"] = lambda fn=fn, dd=dd: fn(dd)
     elapsed = _timer(dev)
     rows = []
     with torch.no_grad():

@@ -294,10 +294,10 @@ def estimate_normals(depth: torch.Tensor, K: Any, *, method: str = "3f2n+",
     return finish(*_clean(z, valid, cam, base, method, o), invalid, out_dtype)
 
 
-@torch.compiler.disable
 def _noise_first(depth, K, depth_scale, o: dict[str, Any]):
     """The noise pass of every frame and the frames that take a noisy branch
-    (:func:`._auto.noisy_frames`), from the inputs: read on the host, so never compiled."""
+    (:func:`._auto.noisy_frames`), from the inputs (its result is read on the host: a compiled
+    call breaks its graph after it)."""
     z, valid, cam, _ = prepare(depth, K, depth_scale)
     cam64 = tuple(c.to(torch.float64) for c in (cam.fx, cam.fy, cam.cx, cam.cy))
     return noisy_frames(z, valid, cam64, o)
