@@ -76,8 +76,9 @@ def _dag(grid: Grid, av: int, au: int) -> tuple[torch.Tensor, torch.Tensor]:
 def _laplacian_4(grid: Grid) -> torch.Tensor:
     """|4-neighbour Laplacian of z| (inf where a neighbour is invalid or outside)."""
     ok = grid.ok(0, -1) & grid.ok(0, 1) & grid.ok(-1, 0) & grid.ok(1, 0)
-    z0 = grid.zs  # differences first: exact for neighbouring depths (no cancellation)
-    s = (grid.z(0, -1) - z0) + (grid.z(0, 1) - z0) + (grid.z(-1, 0) - z0) + (grid.z(1, 0) - z0)
+    # the numba kernel's order of operations, so that exact ties (quantised depth: many
+    # Laplacians are equal) are broken alike: (left + right + up + down) - 4 z
+    s = grid.z(0, -1) + grid.z(0, 1) + grid.z(-1, 0) + grid.z(1, 0) - 4.0 * grid.zs
     return torch.where(ok, s.abs(), torch.full_like(s, float("inf")))
 
 
