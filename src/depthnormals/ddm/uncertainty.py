@@ -18,25 +18,35 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
   that hold the pixel standing for the chosen one), inflated by ``sqrt(residual / sigma^2)``
   where the window's residual variance exceeds the noise (a chi-square test: a window across
   two surfaces is biased as well as noisy);
-- on the box-fit branch the noise error is first scaled by how far the fit error measured on
-  the depth exceeds the i.i.d. prediction at the box radius (:func:`_excess_at`, at least 1:
-  noise correlated over a pixel or so), and the mean angle of the four neighbours' normals to
-  the pixel's is added in quadrature (:data:`SPREAD`): where the window choice flips between
-  surfaces the error is a wrong window, not noise;
+- on the box-fit branch the noise error ``e`` is first scaled by how far the fit error
+  measured on the depth exceeds the i.i.d. prediction at the box radius (:func:`_excess_at`, at
+  least 1: noise correlated over a pixel or so); the map is then a product of powers (in
+  eighths: three square roots per pixel, :func:`_root8`) of ``e``, the mean angle ``s_1`` of
+  the four neighbours' normals to the pixel's, the mean angle ``s_R`` of the normals ``R``
+  (the large radius) to the right and below, and the density of quantisation steps over the
+  large window, times ``1 + g`` (the density of depth jumps) and a factor where ``e`` exceeds
+  three times its frame median (the large window refused) (:func:`_box_rows`,
+  :data:`BOX_MAP`): where the window choice flips between surfaces the error is a wrong
+  window, not noise, and the spreads see it;
 - **the measured support** (``support_select``), self-calibrated on the frame: the level
   ``e_I`` is the mean error of the branch's own output normals in plane interiors, from the
   median angle of interior pixel pairs :data:`SPAN` large-window radii apart
-  (:func:`_interior_error`); per pixel ``e_I sqrt(growth) A q^p`` (``growth`` the measured
-  residual's, ``(z / z_ref)^gamma``), with ``A q^p`` from the centred window's residual ratio
-  inside the gate and a heavier :data:`A_SHIFTED` ``q_min^(1/4)`` where the pixel took a
-  shifted window (near a discontinuity), plus :data:`SPREAD_SUPPORT` times the neighbours'
-  spread (:func:`_support_rows`);
+  (:func:`_interior_error`); per pixel ``lev = e_I sqrt(growth)`` (``growth`` the measured
+  residual's, ``(z / z_ref)^gamma``) enters a product of powers with ``s_1``, ``s_R`` (both at
+  least :data:`SPREAD_LEVEL` ``lev``), the step density and ``1 + g`` jumps, at least
+  :data:`LEVEL_FLOOR` ``lev`` (:func:`_support_rows`, :data:`SUPPORT_MAP`). The spreads carry
+  most of the weight: on the frames of the calibration benchmark the neighbours' spread
+  alone ranked the error better than the former map on every measured-support column, and
+  the Poisson fit of the exponents (module constants) gave the level 1/8 of them (on an
+  isolated plane the map then reads 0.7x the observed mean, tests/test_uncertainty.py);
 - **clean depth** (the plane hypotheses): the float rounding of the one-pixel stencils
   (``sigma / sqrt(6)``) plus, where the pixel's normal agrees with none of its four neighbours'
   (a facet narrower than two pixels: no one-sided stencil fits), the least angle between them.
 
-One vectorised pass per image (:func:`_fit_error_rows`, :func:`_support_rows`,
-:func:`_spread_rows`) over quantities the branches already computed. Conversions to the von
+Vectorised passes per image (:func:`_fit_error_rows`, :func:`_spreads_rows`,
+:func:`_edge_integrals`, :func:`_support_rows`, :func:`_box_rows`, :func:`_spread_rows`) over
+quantities the branches already computed; the densities are read on every second row and
+column of the map's grid. Conversions to the von
 Mises-Fisher concentration of Bae et al. (ICCV 2021): :func:`uncertainty_to_kappa`,
 :func:`kappa_to_uncertainty`.
 """
@@ -71,7 +81,6 @@ from .support import (
     support_profile,
     support_select,
 )
-from .support import GATE as SUPPORT_GATE
 
 __all__ = ["UNCERTAINTY_METHODS", "kappa_to_uncertainty", "normals_with_uncertainty",
            "uncertainty_to_covariance", "uncertainty_to_kappa"]
@@ -80,12 +89,6 @@ __all__ = ["UNCERTAINTY_METHODS", "kappa_to_uncertainty", "normals_with_uncertai
 RAYLEIGH_MEAN = math.sqrt(math.pi / 2.0)
 #: ``S_uu`` of the one-pixel stencils of the plane hypotheses (a 3x3: 3 columns of 1 + 1).
 CLEAN_SUU = 6.0
-#: Box-fit branch: the mean angle of the four neighbours' normals to the pixel's (where the
-#: window choice changes: an edge, a crease) is added in quadrature with this weight to the
-#: fit's error (measured: without it the top decile of the synthetic columns was predicted
-#: 2-5x too low; 1 left tof's and kinect_v2's top deciles 1.3-1.8x low, 2 brings them within
-#: 25 % on the synthetic seed 0, the gaussian top decile then 0.6x; docs/benchmarks.md 17).
-SPREAD = 2.0
 #: The neighbours (dv, du) whose normals the clean branch's map compares with the pixel's.
 CROSS = np.array([[-1, 0], [0, -1], [0, 1], [1, 0]], dtype=np.int64)
 
@@ -100,17 +103,38 @@ SPAN = 4
 PAIR_GRID = 6
 #: Fewest interior pairs for :func:`_interior_error`; with fewer the profile's error stands.
 MIN_PAIRS = 30
-#: Measured support, per pixel (module doc): ``e_I sqrt(growth) A q^p + SPREAD_SUPPORT *
-#: spread``. Where the centred window passes the gate (``q0 <= support.GATE``), ``A = A_INSIDE``,
-#: ``q = max(q0, Q_FLOOR)``, ``p = 1/8``; elsewhere (a shifted window: near an edge)
-#: ``A = A_SHIFTED``, ``q = max(q_min, Q_FLOOR)`` the least residual ratio of the nine
-#: windows, ``p = 1/4``. Fitted (a coordinate search on the log ratios of the decile bins) on
-#: the training split of benchmarks/uncertainty_calibration.py (synthetic seed 0; real
-#: nyu_registered and tum_kinect1), checked on the rest (docs/benchmarks.md, section 17).
-A_INSIDE = 0.65
-A_SHIFTED = 2.45
-Q_FLOOR = 0.6
-SPREAD_SUPPORT = 1.75
+#: Both noisy maps are products of powers (exponents in eighths, :func:`_root8`) of their
+#: features (module doc): the noise level, the mean angles of the normals next to the pixel
+#: (``s_1``) and ``R`` away (``s_R``, at least :data:`SPREAD_FLOOR` degrees), the density of
+#: quantisation steps over the large window (plus :data:`STEP_OFFSET`), times ``1 + g jumps``
+#: (the density of depth jumps, a relative step over :data:`JUMP_REL`). Fitted on the training
+#: split of benchmarks/uncertainty_calibration.py (synthetic seed 0; real nyu_registered and
+#: tum_kinect1): a Poisson regression of the error on the logs of the features (its fit is
+#: the conditional mean, which the decile bins test), the exponents rounded to eighths, then
+#: ``C``, ``g`` (and the box branch's high-error factor) by a coordinate search on the squared
+#: log ratios of the decile bins; checked on the rest (docs/benchmarks.md, section 17).
+SPREAD_FLOOR = 0.01
+JUMP_REL = 0.03
+STEP_OFFSET = 0.3
+#: Measured support: ``max(C lev^k0 s_1^k1 s_R^k2 (STEP_OFFSET + steps)^k3 (1 + g jumps),
+#: LEVEL_FLOOR lev)`` (``k`` in eighths; the angle exponents sum to 8: the map scales with
+#: the error), the spreads at least ``SPREAD_LEVEL lev``; ``SUPPORT_MAP = (C, g)``.
+SUPPORT_MAP = (1.2115, 0.461)
+SUPPORT_POW = (1, 4, 3, 4)
+SPREAD_LEVEL = 0.1
+LEVEL_FLOOR = 0.5
+#: Box-fit branch: ``C e^k0 med^k1 s_1^k2 s_R^k3 (STEP_OFFSET + steps)^k4 (1 + g jumps)``,
+#: ``e`` the i.i.d. fit error of the pixel's window, ``med`` its median over the frame (every
+#: :data:`MEDIAN_STEP`-th row and column); ``BOX_MAP = (C, g)``.
+BOX_MAP = (2.0735, 2.311)
+BOX_POW = (3, 0, 4, 1, -2)
+#: Box-fit branch: where ``e`` exceeds ``BOX_HIGH[0]`` times ``med`` (the large window refused:
+#: the small one's error, near an edge) the map is ``BOX_HIGH[1]`` times the product.
+BOX_HIGH = (3.0, 0.7085)
+MEDIAN_STEP = 7
+#: The box-fit branch reads its jump and step densities on every ``2^BOX_SUB``-th row and
+#: column (full resolution); the measured support's map grid is already every second one.
+BOX_SUB = 1
 
 #: Methods whose uncertainty has a closed form (with their window half-size from the options).
 UNCERTAINTY_METHODS = ("3f2n+", "fals", "pcl-average-3d-gradient", "pcl-average-depth-change",
@@ -127,7 +151,8 @@ def _min_into(a, out_best):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, out):
+def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, out, sp_out,
+                    far_d):
     """Rows ``[v0, v1)`` of the plane-fit error map (module doc), degrees, into ``out`` (H, W).
 
     Reads ``normals`` (H, W, 3) (NaN: ``out`` NaN), ``score`` (H', W') the residual variances
@@ -142,7 +167,10 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
     neighbours' normals to the pixel's, added to the squared error; ``big = (score, gate,
     ratio)``: where the large window's residual (H, W) is
     within ``gate`` times ``var`` the error is ``ratio e0`` and that residual counts (a (1, 1)
-    score: none); ``cam = (fx, fy, cx, cy)``. Every loop runs along a row."""
+    score: none); ``cam = (fx, fy, cx, cy)``. With ``sp_out`` (2, H, W) (not (1, 1, 1)) the
+    mean angle (degrees) of the four neighbours goes to ``sp_out[0]`` instead of into the
+    error, and that of the normals ``far_d`` to the right and below to ``sp_out[1]`` (the
+    ring of planar rows then ``far_d + 2`` deep). Every loop runs along a row."""
     e0t, vart, tile = tiles
     zref, half, floor, tilt, spread = depth
     big_s, big_gate, big_ratio = big
@@ -158,15 +186,25 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
     res = np.empty(w, dtype=f32)
     e0r = np.empty(w, dtype=f32)
     varr = np.empty(w, dtype=f32)
-    ring = np.empty((3, 3, w), dtype=f32)  # rows v - 1, v, v + 1 of the normals, planar
+    split = sp_out.shape[1] == h
+    ahead = far_d if split and far_d > 1 else 1
+    nr = ahead + 2
+    ring = np.empty((nr, 3, w), dtype=f32)  # rows v - 1 .. v + ahead of the normals, planar
     acc = np.empty(w, dtype=f32)
     cnt = np.empty(w, dtype=f32)
-    if v0 > 0:
-        _planar_row(normals, v0 - 1, ring[(v0 - 1) % 3])
-    _planar_row(normals, v0, ring[v0 % 3])
+    acf = np.empty(w, dtype=f32)
+    cnf = np.empty(w, dtype=f32)
+    ra = np.zeros(w, dtype=f32)  # angles to the right neighbour, the one below, the one above
+    rk = np.zeros(w, dtype=f32)
+    da = np.zeros(w, dtype=f32)
+    dk = np.zeros(w, dtype=f32)
+    ua = np.zeros(w, dtype=f32)
+    uk = np.zeros(w, dtype=f32)
+    for a in range(max(0, v0 - 1), min(h, v0 + ahead)):
+        _planar_row(normals, a, ring[a % nr])
     rx = ((np.arange(w) - cx) / fx).astype(f32)
     dg = f32(180.0 / math.pi)
-    sw = f32(spread)
+    sw = f32(0.0 if split else spread)  # split: the spread goes to sp_out, not the error
     deg = f32(math.degrees(RAYLEIGH_MEAN))
     fl = f32(floor)
     one = f32(1.0)
@@ -195,25 +233,49 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
             b = min(a + tile, w)
             e0r[a:b] = et[j]
             varr[a:b] = vt[j]
-        if v + 1 < h:
-            _planar_row(normals, v + 1, ring[(v + 1) % 3])
-        cur = ring[v % 3]
+        if v + ahead < h:
+            _planar_row(normals, v + ahead, ring[(v + ahead) % nr])
+        cur = ring[v % nr]
         x = cur[0]
         y = cur[1]
         t = cur[2]
-        if spread > 0.0:
-            acc[:] = 0.0
-            cnt[:] = 0.0
-            for k in range(CROSS.shape[0]):
-                a = v + CROSS[k, 0]
-                du = CROSS[k, 1]
-                if a < 0 or a >= h:
-                    continue
-                o = ring[a % 3]
-                lo = max(0, -du)
-                hi = min(w, w - du)
-                _chord_into(x[lo:hi], y[lo:hi], t[lo:hi], o[0, lo + du:hi + du],
-                            o[1, lo + du:hi + du], o[2, lo + du:hi + du], acc[lo:hi], cnt[lo:hi])
+        if split and far_d > 0:
+            acf[:] = 0.0
+            cnf[:] = 0.0
+            if far_d < w:
+                hi = w - far_d
+                _chord_into(x[:hi], y[:hi], t[:hi], x[far_d:], y[far_d:], t[far_d:], acf[:hi],
+                            cnf[:hi])
+            if v + far_d < h:
+                o = ring[(v + far_d) % nr]
+                _chord_into(x, y, t, o[0], o[1], o[2], acf, cnf)
+        if spread > 0.0:  # each neighbour pair's angle once (:func:`_spreads_rows`)
+            if v == v0 and v0 > 0:
+                o = ring[(v0 - 1) % nr]
+                _angle_into(o[0], o[1], o[2], x, y, t, da, dk)
+            if v > 0:
+                ua[:] = da
+                uk[:] = dk
+            else:
+                ua[:] = 0.0
+                uk[:] = 0.0
+            if v + 1 < h:
+                o = ring[(v + 1) % nr]
+                _angle_into(x, y, t, o[0], o[1], o[2], da, dk)
+            else:
+                da[:] = 0.0
+                dk[:] = 0.0
+            if w > 1:
+                _angle_into(x[:w - 1], y[:w - 1], t[:w - 1], x[1:], y[1:], t[1:], ra[:w - 1],
+                            rk[:w - 1])
+            ra[w - 1] = 0.0
+            rk[w - 1] = 0.0
+            for u in range(w):
+                acc[u] = ra[u] + da[u] + ua[u]
+                cnt[u] = rk[u] + dk[u] + uk[u]
+            for u in range(1, w):
+                acc[u] += ra[u - 1]
+                cnt[u] += rk[u - 1]
         if half > 0:  # (z / zref)^(half / 2), without a transcendental function
             for u in range(w):
                 tz = np.float64(z[v, u]) * izref
@@ -252,6 +314,14 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
             sp = dg * acc[u] / m if (spread > 0.0) & (m > f32(0.0)) else f32(0.0)
             e = deg * e
             out[v, u] = np.sqrt(e * e + sw * sp * sp) if ok else nan
+        if split:
+            s0 = sp_out[0, v]
+            s1 = sp_out[1, v]
+            for u in range(w):
+                c = cnt[u]
+                s0[u] = dg * acc[u] / c if c > f32(0.0) else f32(0.0)
+                c = cnf[u]
+                s1[u] = dg * acf[u] / c if c > f32(0.0) else f32(0.0)
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -327,101 +397,331 @@ def _interior_error(normals, z, score, prof: SupportProfile) -> float:
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _support_rows(v0, v1, z, normals, score, shift, model, out):
+def _support_rows(v0, v1, z, normals, model, ctx, out):
     """Rows ``[v0, v1)`` of the measured support's map (degrees) into ``out`` (H, W).
 
-    ``model = (e_i, res, zref, half, gate)``: the interior error ``e_i`` (degrees at
-    ``zref``), the plane residual ``res`` at the chosen radius (footprints^2 at ``zref``),
-    both growing with depth (``(z / zref)^(half / 2)`` the residual, its square root the
-    error), and the gate (in residuals) of the centred window. ``score`` (H', W'): the
-    residual variances of the radius's windows, a pixel reading ``[v // step, u // step]``;
-    ``q0`` the centred one's over ``res``, ``q_min`` the least of the nine ``shift (i, j)``
-    away. Per pixel ``e_i sqrt(growth) A q^p + SPREAD_SUPPORT spread`` (:data:`A_INSIDE`,
-    :data:`A_SHIFTED`, :data:`Q_FLOOR`), ``spread`` the mean angle (degrees) of the four
-    neighbours' normals to the pixel's; NaN where the normal is NaN. Every loop runs along a
-    row."""
-    e_i, res0, zref, half, gate = model
-    h, w = z.shape
-    hs, ws = score.shape
-    step = 2 if hs < h else 1
+    ``model = (e_i, zref, half)``: the interior error ``e_i`` (degrees at ``zref``), growing
+    with depth as the square root of the plane residual, ``(z / zref)^(half / 4)``. ``ctx =
+    (s1, far, sub)`` from :func:`_context` on this grid. Per pixel the product of powers of
+    :data:`SUPPORT_MAP` and :data:`SUPPORT_POW` (module doc); NaN where the normal is NaN.
+    Every loop runs along a row."""
+    e_i, zref, half = model
+    s1, far, sub, sh = ctx
+    w = z.shape[1]
     f32 = np.float32
     izref = f32(1.0 / zref if zref > 0.0 else 0.0)
     nan = f32(np.nan)
-    q_s = np.empty(ws, dtype=f32)
-    qm = np.empty(w, dtype=f32)
-    q0 = np.empty(w, dtype=f32)
-    ring = np.empty((3, 3, w), dtype=f32)
+    ei = f32(e_i)
+    fl = f32(SPREAD_FLOOR)
+    k = SUPPORT_POW
+    c0 = f32(SUPPORT_MAP[0])
+    c1 = f32(SUPPORT_MAP[1])
+    so = f32(STEP_OFFSET)
+    fs = f32(SPREAD_LEVEL)
+    fi = f32(LEVEL_FLOOR)
+    f2 = np.empty((2, w), dtype=f32)  # the row's densities from the half grid
+    lev = np.empty(w, dtype=f32)
+    for v in range(v0, v1):
+        _half_row(sub, v, sh, f2)
+        zrow = z[v]
+        for u in range(w):
+            zq = zrow[u]
+            lev[u] = ei * np.sqrt(_growth(zq, izref, half)) if zq == zq else ei
+        a = s1[v]
+        b = far[0, v]
+        jump = f2[0]
+        steps = f2[1]
+        for u in range(w):
+            e = lev[u]
+            e = e if e > fl else fl
+            f = e * fs
+            f = f if f > fl else fl
+            x1 = a[u] if a[u] > f else f
+            x2 = b[u] if b[u] > f else f
+            p = _ipow(e, k[0]) * _ipow(x1, k[1]) * _ipow(x2, k[2])
+            p *= _ipow(so + steps[u], k[3])
+            m = c0 * (f32(1.0) + c1 * jump[u]) * _root8(p)
+            lo = fi * e
+            lev[u] = m if m > lo else lo
+        for u in range(w):
+            nx = normals[v, u, 0]
+            out[v, u] = lev[u] if nx == nx else nan
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _box_rows(v0, v1, e0, med, ctx, out):
+    """Rows ``[v0, v1)`` of the box-fit branch's map (degrees): per pixel the product of
+    powers (:data:`BOX_MAP`, :data:`BOX_POW`, :data:`BOX_HIGH`) of its noise error ``e0``
+    (NaN where the normal is NaN), the frame's median one ``med`` and
+    ``ctx = (s1, far, sub)`` of :func:`_context`. Every loop runs along a row."""
+    s1, far, sub, sh = ctx
+    w = e0.shape[1]
+    f32 = np.float32
+    fl = f32(SPREAD_FLOOR)
+    k = BOX_POW
+    pm = _ipow(f32(med), k[1])
+    e_high = f32(BOX_HIGH[0] * med)
+    f2 = np.empty((2, w), dtype=f32)
+    for v in range(v0, v1):
+        _half_row(sub, v, sh, f2)
+        er = e0[v]
+        s1r = s1[v]
+        s3 = far[0, v]
+        jr = f2[0]
+        sr = f2[1]
+        for u in range(w):
+            e = er[u]
+            x1 = s1r[u] if s1r[u] > fl else fl
+            x3 = s3[u] if s3[u] > fl else fl
+            p = _ipow(e, k[0]) * pm * _ipow(x1, k[2]) * _ipow(x3, k[3])
+            p *= _ipow(f32(STEP_OFFSET) + sr[u], k[4])
+            g = f32(BOX_MAP[0]) * (f32(1.0) + f32(BOX_MAP[1]) * jr[u])
+            g = g * f32(BOX_HIGH[1]) if e > e_high else g
+            out[v, u] = g * _root8(p)
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _half_row(sub, v, sh, out):
+    """Row ``v`` of the features ``sub`` (k, H', W') of every ``2^sh``-th row and column,
+    spread over the full row ``out`` (k, W): pixel ``(v, u)`` reads ``(v >> sh, u >> sh)``
+    (the last row and column clamped)."""
+    vh = min(v >> sh, sub.shape[1] - 1)
+    wl = sub.shape[2] - 1
+    for k in range(out.shape[0]):
+        src = sub[k, vh]
+        dst = out[k]
+        for u in range(dst.size):
+            dst[u] = src[min(u >> sh, wl)]
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _ipow(x, k):
+    """``x ** k`` (float32) for a small integer ``k`` (negative: the reciprocal), by multiplication."""
+    r = np.float32(1.0)
+    for _ in range(abs(k)):
+        r *= x
+    return r if k >= 0 else np.float32(1.0) / r
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _root8(x):
+    """``x ** (1 / 8)`` by three square roots (the maps' exponents are eighths: no
+    transcendental function per pixel)."""
+    return np.sqrt(np.sqrt(np.sqrt(x)))
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _edge_integrals(z, rel, out_jump, out_steps):
+    """Integral images ``(H + 1, W + 1)`` (float32, exact integers) of two indicators on the
+    depth grid ``z``: ``jump`` (the pixel or one of its four neighbours invalid, or a
+    neighbour's depth off by more than ``rel`` of the nearer one: a depth discontinuity) and
+    ``steps`` (how many of the four neighbours have another finite depth: the density of
+    quantisation steps). Every loop runs along a row."""
+    h, w = z.shape
+    f32 = np.float32
+    one = f32(1.0)
+    zero = f32(0.0)
+    f = f32(rel)
+    jh = np.zeros(w, dtype=f32)  # the pair (u, u + 1) of the row
+    sh = np.zeros(w, dtype=f32)
+    jv = np.zeros(w, dtype=f32)  # the pair (v, v + 1) per column
+    sv = np.zeros(w, dtype=f32)
+    jp = np.zeros(w, dtype=f32)  # the pair (v - 1, v)
+    spv = np.zeros(w, dtype=f32)
+    out_jump[0, :] = 0.0
+    out_steps[0, :] = 0.0
+    for v in range(h):
+        a = z[v]
+        for u in range(w - 1):
+            x = a[u]
+            y = a[u + 1]
+            d = abs(x - y)
+            m = x if x < y else y
+            jh[u] = zero if d <= f * m else one
+            sh[u] = one if d > zero else zero
+        jp[:] = jv
+        spv[:] = sv
+        if v + 1 < h:
+            b = z[v + 1]
+            for u in range(w):
+                x = a[u]
+                y = b[u]
+                d = abs(x - y)
+                m = x if x < y else y
+                jv[u] = zero if d <= f * m else one
+                sv[u] = one if d > zero else zero
+        else:
+            jv[:] = 0.0
+            sv[:] = 0.0
+        rj = zero
+        rs = zero
+        pj = out_jump[v]
+        ps = out_steps[v]
+        qj = out_jump[v + 1]
+        qs = out_steps[v + 1]
+        qj[0] = 0.0
+        qs[0] = 0.0
+        for u in range(w):
+            x = a[u]
+            j = zero if x == x else one
+            j = max(j, jv[u], jp[u])
+            t = sv[u] + spv[u]
+            if u > 0:
+                j = max(j, jh[u - 1])
+                t += sh[u - 1]
+            if u + 1 < w:
+                j = max(j, jh[u])
+                t += sh[u]
+            rj += j
+            rs += t
+            qj[u + 1] = pj[u + 1] + rj
+            qs[u + 1] = ps[u + 1] + rs
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _angle_into(x, y, t, a, b, c, out_ang, out_ok):
+    """The angle between the normals (x, y, t) and (a, b, c) (from the chord as in
+    :func:`_chord_into`; 0 where either is NaN) and whether both are finite (1 or 0)."""
+    f32 = np.float32
+    for i in range(out_ang.size):
+        d = x[i] * a[i] + y[i] * b[i] + t[i] * c[i]
+        ok = d == d
+        c2 = f32(2.0) - f32(2.0) * d
+        k = np.sqrt(c2 if c2 > f32(0.0) else f32(0.0))
+        out_ang[i] = k + k * c2 * f32(1.0 / 24.0) if ok else f32(0.0)
+        out_ok[i] = f32(1.0) if ok else f32(0.0)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _spreads_rows(v0, v1, planar, far_d, out):
+    """Rows ``[v0, v1)``: the mean angle (degrees) between the pixel's normal and the finite
+    normals of its four neighbours (``out[0]``) and of the pixels ``far_d`` to the right and
+    below (``out[1]``), 0 without one. Each neighbour pair's angle is computed once (the left
+    one is the right one of the pixel to the left, the one above the one below of the row
+    above). ``planar``: the normals (3, H, W). Every loop runs along a row over contiguous
+    memory."""
+    h, w = planar.shape[1:]
+    f32 = np.float32
+    zero = f32(0.0)
+    dg = f32(180.0 / math.pi)
+    ra = np.zeros(w, dtype=f32)  # angle to the right neighbour, and whether defined
+    rk = np.zeros(w, dtype=f32)
+    da = np.zeros(w, dtype=f32)  # to the one below: this row's and the row above's
+    dk = np.zeros(w, dtype=f32)
+    ua = np.zeros(w, dtype=f32)
+    uk = np.zeros(w, dtype=f32)
     acc = np.empty(w, dtype=f32)
     cnt = np.empty(w, dtype=f32)
     if v0 > 0:
-        _planar_row(normals, v0 - 1, ring[(v0 - 1) % 3])
-    _planar_row(normals, v0, ring[v0 % 3])
-    dg = f32(180.0 / math.pi)
-    ir = f32(1.0 / res0 if res0 > 0.0 else 0.0)
-    g = f32(gate)
-    fl = f32(Q_FLOOR)
-    cap = f32(1e4)
-    ai = f32(A_INSIDE)
-    ash = f32(A_SHIFTED)
-    cs = f32(SPREAD_SUPPORT)
-    ei = f32(e_i)
+        _angle_into(planar[0, v0 - 1], planar[1, v0 - 1], planar[2, v0 - 1], planar[0, v0],
+                    planar[1, v0], planar[2, v0], da, dk)
     for v in range(v0, v1):
-        vs = v // step
-        q_s[:] = np.inf
-        for dv in range(-1, 2):
-            a = vs + shift * dv
-            if a < 0 or a >= hs:
-                continue
-            for du in range(-1, 2):
-                d = shift * du
-                lo = max(0, -d)
-                hi = min(ws, ws - d)
-                _min_into(score[a, lo + d:hi + d], q_s[lo:hi])
-        srow = score[vs]
-        if step == 1:
-            qm[:] = q_s[:w]
-            q0[:] = srow[:w]
-        else:
-            for u in range(w):
-                qm[u] = q_s[u >> 1]
-                q0[u] = srow[u >> 1]
+        x = planar[0, v]
+        y = planar[1, v]
+        t = planar[2, v]
+        ua[:] = da
+        uk[:] = dk
+        if v == 0:
+            ua[:] = 0.0
+            uk[:] = 0.0
         if v + 1 < h:
-            _planar_row(normals, v + 1, ring[(v + 1) % 3])
-        cur = ring[v % 3]
-        x = cur[0]
-        y = cur[1]
-        t = cur[2]
+            _angle_into(x, y, t, planar[0, v + 1], planar[1, v + 1], planar[2, v + 1], da, dk)
+        else:
+            da[:] = 0.0
+            dk[:] = 0.0
+        if w > 1:
+            _angle_into(x[:w - 1], y[:w - 1], t[:w - 1], x[1:], y[1:], t[1:], ra[:w - 1],
+                        rk[:w - 1])
+        ra[w - 1] = 0.0
+        rk[w - 1] = 0.0
+        for u in range(w):
+            acc[u] = ra[u] + da[u] + ua[u]
+            cnt[u] = rk[u] + dk[u] + uk[u]
+        for u in range(1, w):
+            acc[u] += ra[u - 1]
+            cnt[u] += rk[u - 1]
+        o = out[0, v]
+        for u in range(w):
+            c = cnt[u]
+            o[u] = dg * acc[u] / c if c > zero else zero
         acc[:] = 0.0
         cnt[:] = 0.0
-        for k in range(CROSS.shape[0]):
-            a = v + CROSS[k, 0]
-            du = CROSS[k, 1]
-            if a < 0 or a >= h:
-                continue
-            o = ring[a % 3]
-            lo = max(0, -du)
-            hi = min(w, w - du)
-            _chord_into(x[lo:hi], y[lo:hi], t[lo:hi], o[0, lo + du:hi + du],
-                        o[1, lo + du:hi + du], o[2, lo + du:hi + du], acc[lo:hi], cnt[lo:hi])
-        zrow = z[v]
-        for u in range(w):  # branch-free, float32
-            zq = zrow[u]
-            gr = _growth(zq, izref, half) if zq == zq else f32(1.0)
-            inv = ir / gr
-            a0 = q0[u] * inv
-            a0 = a0 if a0 < cap else cap
-            am = qm[u] * inv
-            am = am if am < cap else cap
-            inside = a0 <= g
-            q = a0 if inside else am
-            q = q if q > fl else fl
-            r2 = np.sqrt(q)
-            r4 = np.sqrt(r2)
-            fac = ai * np.sqrt(r4) if inside else ash * r4
-            sp = dg * acc[u] / cnt[u] if cnt[u] > f32(0.0) else f32(0.0)
-            e = ei * np.sqrt(gr) * fac + cs * sp
-            ok = x[u] + y[u] + t[u] - (x[u] + y[u] + t[u]) == f32(0.0)
-            out[v, u] = e if ok else nan
+        if far_d < w:
+            hi = w - far_d
+            _chord_into(x[:hi], y[:hi], t[:hi], x[far_d:], y[far_d:], t[far_d:], acc[:hi],
+                        cnt[:hi])
+        if v + far_d < h:
+            a = v + far_d
+            _chord_into(x, y, t, planar[0, a], planar[1, a], planar[2, a], acc, cnt)
+        o = out[1, v]
+        for u in range(w):
+            c = cnt[u]
+            o[u] = dg * acc[u] / c if c > zero else zero
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _box_cols(w, r, lo, hi, inv):
+    """Per column ``u`` the clipped window ``[lo, hi)`` of radius ``r`` and ``1 / (hi - lo)``."""
+    for u in range(w):
+        a = max(0, u - r)
+        b = min(w, u + r + 1)
+        lo[u] = a
+        hi[u] = b
+        inv[u] = np.float32(1.0) / np.float32(b - a)
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _box_row(ii, v, r, lo, hi, inv, out):
+    """Row ``v`` of the mean over the clipped ``(2 r + 1)^2`` windows of the integral image
+    ``ii`` (H + 1, W + 1) into ``out`` (columns from :func:`_box_cols`)."""
+    h = ii.shape[0] - 1
+    a = max(0, v - r)
+    b = min(h, v + r + 1)
+    ra = ii[a]
+    rb = ii[b]
+    iv = np.float32(1.0) / np.float32(b - a)
+    for u in range(out.size):
+        c = lo[u]
+        d = hi[u]
+        out[u] = (rb[d] - ra[d] - rb[c] + ra[c]) * (iv * inv[u])
+
+
+def _context(zg, ng, big: int, spreads=None, shift: int = 1) -> tuple:
+    """What both noisy maps read besides their noise term, on the grid of their choice
+    (depth ``zg``, normals ``ng``): the mean angle of the normals of the four neighbours
+    (H, W) and of the pixels ``big`` to the right and below (1, H, W) (:func:`_spreads_rows`;
+    ``spreads`` (2, H, W) when already known); on every ``2^shift``-th row and column of that grid
+    (the radius divided alike) the means over the large window of the depth jumps and
+    quantisation steps (:func:`_edge_integrals`), (2, H', W')."""
+    if spreads is None:
+        h, w = zg.shape
+        planar = np.ascontiguousarray(ng.transpose(2, 0, 1))
+        spreads = np.empty((2, h, w), dtype=np.float32)
+        run_rows(_spreads_rows, h, planar, max(1, big), spreads, min_rows=16)
+    s1, far = spreads[0], spreads[1:]
+    st = 1 << shift
+    zs = np.ascontiguousarray(zg[::st, ::st])
+    hs, ws = zs.shape
+    sub = np.empty((2, hs, ws), dtype=np.float32)
+    ij = np.empty((hs + 1, ws + 1), dtype=np.float32)
+    ist = np.empty((hs + 1, ws + 1), dtype=np.float32)
+    _edge_integrals(zs, JUMP_REL, ij, ist)
+    _box_planes(ij, ist, max(1, big // st), sub[0], sub[1])
+    return s1, far, sub, shift
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _box_planes(ij, ist, r, out_j, out_s):
+    """The means over the clipped ``(2 r + 1)^2`` windows of the integral images ``ij`` and
+    ``ist`` (:func:`_edge_integrals`) into ``out_j`` and ``out_s`` (H, W)."""
+    h, w = out_j.shape
+    c_lo = np.empty(w, dtype=np.int64)
+    c_hi = np.empty(w, dtype=np.int64)
+    inv = np.empty(w, dtype=np.float32)
+    _box_cols(w, r, c_lo, c_hi, inv)
+    for v in range(h):
+        _box_row(ij, v, r, c_lo, c_hi, inv, out_j[v])
+        _box_row(ist, v, r, c_lo, c_hi, inv, out_s[v])
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -509,12 +809,15 @@ def _tile_maps(z: np.ndarray, fx: float, fy: float, sigma: float, r: int,
     return e0, np.ascontiguousarray(t * t), TILE
 
 
-def _fit_error(z, normals, score, shift, tiles, depth, big, cam) -> np.ndarray:
+def _fit_error(z, normals, score, shift, tiles, depth, big, cam, sp_out=None,
+               far_d: int = 0) -> np.ndarray:
     out = np.empty(z.shape, dtype=np.float32)
     if big is None:
         big = (np.full((1, 1), np.inf, dtype=np.float32), 0.0, 1.0)
+    if sp_out is None:
+        sp_out = np.empty((1, 1, 1), dtype=np.float32)
     run_rows(_fit_error_rows, z.shape[0], z, normals, score, int(shift), tiles, depth, big, cam,
-             out, min_rows=16)
+             out, sp_out, int(far_d), min_rows=16)
     return out
 
 
@@ -543,47 +846,59 @@ def _box_branch(z, cam, sigma, levels, prof):
     e0, var, tile = _tile_maps(z, fx, fy, sigma, r, levels, NOISE_CLEAN)
     tiles = (e0 * _excess_at(prof, r), var, tile)
     bigs = (big_s, GATE, math.sqrt(_full_suu(r) / _full_suu(big))) if big > r else None
-    unc = _fit_error(z, out, score, r, tiles, (1.0, 0, 1.0, True, SPREAD), bigs, cam)
+    sp = np.empty((2, *z.shape), dtype=np.float32)
+    e0 = _fit_error(z, out, score, r, tiles, (1.0, 0, 1.0, True, 1.0), bigs, cam, sp, big)
+    sub = e0[::MEDIAN_STEP, ::MEDIAN_STEP]
+    sub = sub[np.isfinite(sub)]
+    med = float(np.median(sub)) if sub.size else 1.0
+    ctx = _context(z, out, big, sp, BOX_SUB)
+    unc = np.empty(z.shape, dtype=np.float32)
+    run_rows(_box_rows, z.shape[0], e0, max(med, 1e-6), ctx, unc, min_rows=16)
     return out, unc
 
 
 def _support_branch(z, cam, sigma, prof):
     """The measured-support branch with its map (module doc). Where the branch chose on every
-    second row and column, so does the map (the neighbours' spread then two pixels apart),
-    each pixel reading its 2x2 cell's."""
+    second row and column, so does the map (its spreads and densities on that grid, distances
+    halved), each pixel reading its 2x2 cell's."""
     fx, fy, cx, cy = cam
     scores: list = []
     out = support_select(z, fx, fy, cx, cy, sigma, profile=prof, out_scores=scores)
-    score, shift, half_n = scores
-    i = prof.radii.index(prof.radius)
+    score, _, half_n = scores
     e_i = _interior_error(out, z, score, prof)
     zref = prof.depth if prof.depth == prof.depth else 1.0
     half = round(2.0 * prof.exponent) if prof.depth == prof.depth else 0
-    model = (float(e_i), float(max(prof.residual[i], 1e-30)), float(zref), half, float(SUPPORT_GATE))
+    model = (float(e_i), float(zref), half)
+    big = min(MAX_RADIUS, round(BIG_FACTOR * prof.radius))
     if half_n is None:
+        ctx = _context(z, out, big)
         unc = np.empty(z.shape, dtype=np.float32)
-        run_rows(_support_rows, z.shape[0], z, out, score, int(shift), model, unc, min_rows=16)
+        run_rows(_support_rows, z.shape[0], z, out, model, ctx, unc, min_rows=16)
         return out, unc
     zd = np.ascontiguousarray(z[::2, ::2])
+    ctx = _context(zd, half_n, big // 2)
     zd = np.where(np.isnan(zd), zd.dtype.type(zref), zd)  # the half grid's cells all chose
     coarse = np.empty(zd.shape, dtype=np.float32)
-    run_rows(_support_rows, zd.shape[0], zd, half_n, score, int(shift), model, coarse,
-             min_rows=8)
+    run_rows(_support_rows, zd.shape[0], zd, half_n, model, ctx, coarse, min_rows=8)
     unc = np.empty(z.shape, dtype=np.float32)
-    run_rows(_upsample_rows, z.shape[0], coarse, out, unc, min_rows=16)
+    run_rows(_upsample_rows, z.shape[0], coarse, z, unc, min_rows=16)
     return out, unc
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _upsample_rows(v0, v1, coarse, normals, out):
-    """Rows ``[v0, v1)``: ``out[v, u] = coarse[v // 2, u // 2]``, NaN where ``normals`` is."""
+def _upsample_rows(v0, v1, coarse, z, out):
+    """Rows ``[v0, v1)``: ``out[v, u] = coarse[v // 2, u // 2]``, NaN where the depth ``z``
+    is (the branch's normal is NaN exactly there and where its cell's is, whose ``coarse`` is
+    NaN). Every loop runs along a row."""
     w = out.shape[1]
     nan = np.float32(np.nan)
     for v in range(v0, v1):
         c = coarse[v >> 1]
+        zr = z[v]
+        o = out[v]
         for u in range(w):
-            x = normals[v, u, 0]
-            out[v, u] = c[u >> 1] if x == x else nan
+            x = zr[u]
+            o[u] = c[u >> 1] if x == x else nan
 
 
 def _clean_branch(z, cam, sigma):
