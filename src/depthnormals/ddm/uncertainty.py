@@ -737,13 +737,14 @@ def _planar_row(normals, v, out3):
 def _chord_into(x, y, t, a, b, c, out_acc, out_cnt):
     """Adds the angle between the normals (x, y, t) and (a, b, c) (``2 asin(k / 2) ~
     k + k^3 / 24`` from the chord ``k``) where finite, and counts them."""
+    f32 = np.float32  # float32 constants: a float64 literal made the loop float64
     for i in range(out_acc.size):
         d = x[i] * a[i] + y[i] * b[i] + t[i] * c[i]
         ok = d == d
-        c2 = 2.0 - 2.0 * d
-        k = np.sqrt(c2 if c2 > np.float32(0.0) else np.float32(0.0))
-        out_acc[i] += k + k * c2 * np.float32(1.0 / 24.0) if ok else np.float32(0.0)
-        out_cnt[i] += np.float32(1.0) if ok else np.float32(0.0)
+        c2 = f32(2.0) - f32(2.0) * d
+        k = np.sqrt(c2 if c2 > f32(0.0) else f32(0.0))
+        out_acc[i] += k + k * c2 * f32(1.0 / 24.0) if ok else f32(0.0)
+        out_cnt[i] += f32(1.0) if ok else f32(0.0)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -784,11 +785,12 @@ def _spread_rows(v0, v1, planar, base, out):
 def _chord_min_into(x, y, t, a, b, c, out_best):
     """``out_best = min(out_best, angle)`` between the normals (x, y, t) and (a, b, c) where
     finite (the angle from the chord as in :func:`_chord_into`)."""
+    f32 = np.float32  # float32 constants throughout (as :func:`_chord_into`)
     for i in range(out_best.size):
         d = x[i] * a[i] + y[i] * b[i] + t[i] * c[i]
-        c2 = 2.0 - 2.0 * d
-        k = np.sqrt(c2 if c2 > np.float32(0.0) else np.float32(0.0))
-        ang = k + k * c2 * np.float32(1.0 / 24.0)
+        c2 = f32(2.0) - f32(2.0) * d
+        k = np.sqrt(c2 if c2 > f32(0.0) else f32(0.0))
+        ang = k + k * c2 * f32(1.0 / 24.0)
         cur = out_best[i]
         out_best[i] = ang if (d == d) & (ang < cur) else cur
 
