@@ -38,6 +38,8 @@ def _check(depths, Ks, label, **options):
         a = dn.estimate_normals(z, K, **options)
         na, nb = np.isnan(a).any(-1), np.isnan(b[i]).any(-1)
         assert (na == nb).all(), f"{label}[{i}]: NaN patterns differ at {int((na != nb).sum())} pixels"
+        if na.all():
+            continue
         err = dn.angular_error(a[~na][None].astype(np.float64), b[i][~na][None])[0]
         # a normal perpendicular to its viewing ray (|cos| < 1e-6: a plane through the camera,
         # the stairs' risers seen edge-on) has no defined orientation: both libraries decide it
@@ -223,3 +225,26 @@ def test_uncertainty_tensor():
     assert torch.equal(uz == 0, (nz == 0).all(1, keepdim=True)) and not torch.isnan(uz).any()
     with pytest.raises(ValueError, match="3f2n\\+"):
         dt.estimate_normals(z, K_SMALL, method="d2nt+", return_uncertainty=True)
+
+
+@pytest.mark.parametrize("selection", ["auto", "box-fit"])
+def test_degenerate_frames(selection):
+    """Frames without enough depth for any sample (all invalid, 1x1, 2x3, one valid pixel,
+    NaN rows, a tiny quantised ramp) and a batch holding an all-invalid frame beside a noisy
+    and a clean one (per-frame K): no error, the numba library's NaN pattern and normals."""
+    import warnings
+
+    rng = np.random.default_rng(0)
+    K = (50.0, 50.0, 10.0, 8.0)
+    frames = [np.zeros((17, 21)), np.full((1, 1), 2.0), np.full((2, 3), 2.0),
+              np.where(np.arange(17 * 21).reshape(17, 21) == 100, 2.0, 0.0),
+              np.where(np.arange(40)[:, None] % 7 == 0, np.nan, 2.0 + rng.normal(size=(40, 50)) * 0.004),
+              np.round((2.0 + 0.01 * np.arange(30)[None, :] + 0 * np.arange(20)[:, None]) * 200) / 200]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", dn.NoValidNormalWarning)
+        for z in frames:
+            _check([z], [K], f"degenerate {z.shape}", selection=selection)
+        noisy = dict(FRAMES)["box-on-floor gaussian"]
+        clean = make_scene("box-on-floor").render(K=K_SMALL, shape=(120, 160)).depth
+        _check([np.zeros((120, 160)), noisy, clean], [K_SMALL, (140.0, 138.0, 80.0, 60.0), K_SMALL],
+               "mixed batch", selection=selection)
