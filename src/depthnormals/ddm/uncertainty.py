@@ -253,29 +253,7 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
             if v == v0 and v0 > 0:
                 o = ring[(v0 - 1) % nr]
                 _angle_into(o[0], o[1], o[2], x, y, t, da, dk)
-            if v > 0:
-                ua[:] = da
-                uk[:] = dk
-            else:
-                ua[:] = 0.0
-                uk[:] = 0.0
-            if v + 1 < h:
-                o = ring[(v + 1) % nr]
-                _angle_into(x, y, t, o[0], o[1], o[2], da, dk)
-            else:
-                da[:] = 0.0
-                dk[:] = 0.0
-            if w > 1:
-                _angle_into(x[:w - 1], y[:w - 1], t[:w - 1], x[1:], y[1:], t[1:], ra[:w - 1],
-                            rk[:w - 1])
-            ra[w - 1] = 0.0
-            rk[w - 1] = 0.0
-            for u in range(w):
-                acc[u] = ra[u] + da[u] + ua[u]
-                cnt[u] = rk[u] + dk[u] + uk[u]
-            for u in range(1, w):
-                acc[u] += ra[u - 1]
-                cnt[u] += rk[u - 1]
+            _four_angles(x, y, t, ring[(v + 1) % nr], v, h, (ra, rk, da, dk, ua, uk), acc, cnt)
         if half > 0:  # (z / zref)^(half / 2), without a transcendental function
             for u in range(w):
                 tz = np.float64(z[v, u]) * izref
@@ -592,6 +570,38 @@ def _angle_into(x, y, t, a, b, c, out_ang, out_ok):
         out_ok[i] = f32(1.0) if ok else f32(0.0)
 
 
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _four_angles(x, y, t, below, v, h, scratch, acc, cnt):
+    """Row ``v`` (normals ``x, y, t``) of the four-neighbour angles: ``acc`` their sum,
+    ``cnt`` how many are defined. ``scratch = (ra, rk, da, dk, ua, uk)``: ``da, dk`` hold on
+    entry the angles between rows ``v - 1`` and ``v`` (each pair once) and on return those
+    between ``v`` and ``v + 1`` (``below``, read where ``v + 1 < h``)."""
+    ra, rk, da, dk, ua, uk = scratch
+    w = x.size
+    if v > 0:
+        ua[:] = da
+        uk[:] = dk
+    else:
+        ua[:] = 0.0
+        uk[:] = 0.0
+    if v + 1 < h:
+        _angle_into(x, y, t, below[0], below[1], below[2], da, dk)
+    else:
+        da[:] = 0.0
+        dk[:] = 0.0
+    if w > 1:
+        _angle_into(x[:w - 1], y[:w - 1], t[:w - 1], x[1:], y[1:], t[1:], ra[:w - 1],
+                    rk[:w - 1])
+    ra[w - 1] = 0.0
+    rk[w - 1] = 0.0
+    for u in range(w):
+        acc[u] = ra[u] + da[u] + ua[u]
+        cnt[u] = rk[u] + dk[u] + uk[u]
+    for u in range(1, w):
+        acc[u] += ra[u - 1]
+        cnt[u] += rk[u - 1]
+
+
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _spreads_rows(v0, v1, planar, far_d, out):
     """Rows ``[v0, v1)``: the mean angle (degrees) between the pixel's normal and the finite
@@ -619,27 +629,8 @@ def _spreads_rows(v0, v1, planar, far_d, out):
         x = planar[0, v]
         y = planar[1, v]
         t = planar[2, v]
-        ua[:] = da
-        uk[:] = dk
-        if v == 0:
-            ua[:] = 0.0
-            uk[:] = 0.0
-        if v + 1 < h:
-            _angle_into(x, y, t, planar[0, v + 1], planar[1, v + 1], planar[2, v + 1], da, dk)
-        else:
-            da[:] = 0.0
-            dk[:] = 0.0
-        if w > 1:
-            _angle_into(x[:w - 1], y[:w - 1], t[:w - 1], x[1:], y[1:], t[1:], ra[:w - 1],
-                        rk[:w - 1])
-        ra[w - 1] = 0.0
-        rk[w - 1] = 0.0
-        for u in range(w):
-            acc[u] = ra[u] + da[u] + ua[u]
-            cnt[u] = rk[u] + dk[u] + uk[u]
-        for u in range(1, w):
-            acc[u] += ra[u - 1]
-            cnt[u] += rk[u - 1]
+        _four_angles(x, y, t, planar[:, min(v + 1, h - 1)], v, h, (ra, rk, da, dk, ua, uk), acc,
+                     cnt)
         o = out[0, v]
         for u in range(w):
             c = cnt[u]
