@@ -182,6 +182,7 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
     izref = 1.0 / zref if zref > 0.0 else 0.0
     nan = np.float32(np.nan)
     res_s = np.empty(ws, dtype=np.float32)
+    res_c = np.empty(ws, dtype=np.float32)
     f32 = np.float32
     res = np.empty(w, dtype=f32)
     e0r = np.empty(w, dtype=f32)
@@ -211,16 +212,19 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
     cap = f32(1e4)
     for v in range(v0, v1):
         vs = v // step
-        res_s[:] = np.inf
+        # the least of the nine windows, separably: over the three rows, then the three columns
+        res_c[:] = np.inf
         for dv in range(-1, 2):
             a = vs + shift * dv
-            if a < 0 or a >= hs:
-                continue
-            for du in range(-1, 2):
-                d = shift * du
-                lo = max(0, -d)
-                hi = min(ws, ws - d)
-                _min_into(score[a, lo + d:hi + d], res_s[lo:hi])
+            if 0 <= a < hs:
+                _min_into(score[a], res_c)
+        res_s[:] = res_c
+        for du in (-1, 1):
+            d = shift * du
+            lo = max(0, -d)
+            hi = min(ws, ws - d)
+            if lo < hi:
+                _min_into(res_c[lo + d:hi + d], res_s[lo:hi])
         et = e0t[v // tile]
         vt = vart[v // tile]
         if step == 1:
