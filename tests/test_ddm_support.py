@@ -200,3 +200,32 @@ def test_default_on_the_kinect_v1_model():
     ours = err(dn.estimate_normals(d, r.K))
     assert ours < 0.7 * err(dn.estimate_normals(d, r.K, method="fals", window=11))
     assert ours < 0.8 * err(dn.estimate_normals(d, r.K, method="pcl-average-3d-gradient"))
+
+
+def test_batched_profile_statistics_equal_the_per_frame_ones():
+    """profiles_from_pair_tables (the torch port's batched statistics) gives, bit for bit, the
+    profiles of profile_from_pairs frame by frame: random pair tables with ties (rounded
+    values), odd and even counts, a frame with too few pairs at some radius and an empty one."""
+    from depthnormals.ddm.support import RADII, profile_from_pairs, profiles_from_pair_tables
+
+    rng = np.random.default_rng(7)
+    b, p = 6, 40
+    tables = []
+    for k, _ in enumerate(RADII):
+        rows = np.stack([np.round(rng.gamma(2.0, 3.0 / (k + 1), (b, p)), 2),
+                         np.round(rng.gamma(2.0, 0.5 * (k + 1), (b, p)), 3),
+                         rng.uniform(1.0, 4.0, (b, p))], axis=-1)
+        ok = rng.random((b, p)) < 0.7
+        ok[1, : p - 9 - k] = False  # frame 1: fewer than 12 pairs from some radius on
+        ok[2] = False  # frame 2: none at all
+        tables.append((rows, ok))
+    sigmas = [0.3, 1.2, float("nan"), 0.0, 2.0, 0.05]
+    batch = profiles_from_pair_tables(tables, sigmas)
+    for f, sigma in enumerate(sigmas):
+        single = profile_from_pairs({r: rows[f][ok[f]] for r, (rows, ok) in zip(RADII, tables, strict=True)}
+                                    .__getitem__, sigma)
+        assert repr(batch[f]) == repr(single), f
+    assert batch[2].radii == (1,) and len(batch[1].radii) < len(RADII)
+    empty = [(np.zeros((2, 0, 3)), np.zeros((2, 0), dtype=bool)) for _ in RADII]  # no pair
+    assert [repr(q) for q in profiles_from_pair_tables(empty, [0.1, 0.2])] == \
+        [repr(profile_from_pairs(lambda r: np.zeros((0, 3)), s)) for s in (0.1, 0.2)]

@@ -36,6 +36,7 @@ running sums: the cost does not depend on the radius.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -47,7 +48,8 @@ from .boxfit import SHIFTS, box_fit_windows, solve_window
 
 __all__ = ["BIG_FACTOR", "EXCESS_FLOOR", "GATE", "MAX_RADIUS", "PAIR_TO_ERROR", "RADII",
            "TARGET_ERROR", "SupportProfile", "choice_inputs", "choose_pixel", "depth_exponent",
-           "predicted_error", "profile_from_pairs", "sample_every", "sample_step",
+           "predicted_error", "profile_from_pairs", "profiles_from_pair_tables", "sample_every",
+           "sample_step",
            "support_profile", "support_select"]
 
 #: Candidate window radii (windows of 3x3 to 33x33 pixels).
@@ -180,9 +182,15 @@ def predicted_error(sigma: float, r: int, every: int = 1) -> float:
     (``S_uu = sum du^2`` over the window's pixels), times ``sqrt(pi / 2)``."""
     if not sigma > 0.0:
         return 0.0
+    return math.degrees(math.sqrt(math.pi / 2.0) * sigma / math.sqrt(_window_suu(r, every)))
+
+
+@functools.cache
+def _window_suu(r: int, every: int) -> float:
+    """``S_uu = sum du^2`` over a full ``(2 r + 1)^2`` window read on every ``every``-th row
+    and column."""
     offsets = np.arange(-r, r + 1, every, dtype=np.float64)
-    suu = offsets.size * float(np.sum(offsets * offsets))
-    return math.degrees(math.sqrt(math.pi / 2.0) * sigma / math.sqrt(suu))
+    return offsets.size * float(np.sum(offsets * offsets))
 
 
 @dataclass(frozen=True)
@@ -295,6 +303,63 @@ def profile_from_pairs(pairs, sigma: float, *, target: float = TARGET_ERROR) -> 
     zref, gamma = depth_exponent(kept[i][:, 1], kept[i][:, 2])
     return SupportProfile(tuple(radii), tuple(errors), tuple(residuals), radii[i], zref, gamma,
                           tuple(meas), tuple(pred))
+
+
+def _row_medians(x: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """``np.median`` of each row's entries where ``ok`` (NaN where there is none), as numpy
+    computes it: the middle one of the sorted entries, or the mean of the two middle ones."""
+    if x.shape[1] == 0:  # no pair at all (an image smaller than the windows)
+        return np.full(x.shape[0], np.nan)
+    srt = np.sort(np.where(ok, x, np.inf), axis=1)
+    n = ok.sum(axis=1)
+    i = np.arange(x.shape[0])
+    lo = srt[i, np.clip((n - 1) // 2, 0, None)]
+    hi = srt[i, np.clip(n // 2, 0, x.shape[1] - 1)]
+    med = np.where(n % 2 == 1, hi, np.mean(np.stack([lo, hi]), axis=0))
+    return np.where(n > 0, med, np.nan)
+
+
+def profiles_from_pair_tables(tables: list[tuple[np.ndarray, np.ndarray]],
+                              sigmas: list[float], *,
+                              target: float = TARGET_ERROR) -> list[SupportProfile]:
+    """:func:`profile_from_pairs` for a batch of frames at once: ``tables[k] = (rows (B, P, 3),
+    ok (B, P))`` the pairs of radius ``RADII[k]`` of every frame (rows where ``ok``), ``sigmas``
+    the frames' noise levels. The medians of every frame and radius are computed together
+    (:func:`_row_medians`, numpy's own arithmetic), the choices frame by frame: the same
+    profiles as one call of :func:`profile_from_pairs` per frame (tested)."""
+    per_radius = []
+    for rows, ok in tables:
+        n = ok.sum(axis=1)
+        ang, res = rows[..., 0], rows[..., 1]
+        med_res = _row_medians(res, ok)
+        keep = ok & (res <= med_res[:, None])
+        per_radius.append((n, PAIR_TO_ERROR * _row_medians(ang, keep), _row_medians(res, keep), keep))
+    out = []
+    for f, sigma in enumerate(sigmas):
+        radii, errors, residuals, meas, pred, keeps = [], [], [], [], [], []
+        for k, r in enumerate(RADII):
+            n, measured, resid, keep = per_radius[k]
+            if n[f] < MIN_PAIRS:
+                break
+            radii.append(r)
+            meas.append(float(measured[f]))
+            pred.append(predicted_error(sigma, r, sample_every(r)))
+            errors.append(max(float(measured[f]), predicted_error(sigma, r)))
+            residuals.append(float(resid[f]))
+            keeps.append(k)
+            if errors[-1] <= target:
+                break
+        if not radii:
+            out.append(SupportProfile((1,), (float("nan"),), (0.0,), 1, measured=(float("nan"),),
+                                      predicted=(0.0,)))
+            continue
+        i = next((j for j, e in enumerate(errors) if e <= target), int(np.argmin(errors)))
+        k = keeps[i]
+        kept = tables[k][0][f][per_radius[k][3][f]]
+        zref, gamma = depth_exponent(kept[:, 1], kept[:, 2])
+        out.append(SupportProfile(tuple(radii), tuple(errors), tuple(residuals), radii[i], zref,
+                                  gamma, tuple(meas), tuple(pred)))
+    return out
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")

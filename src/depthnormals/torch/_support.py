@@ -1,15 +1,24 @@
 """The measured support of the default 3F2N+ in torch: the adjacent-window pairs of
 :func:`depthnormals.ddm.support.support_profile`, fitted on the device for every frame and
 radius at once; the statistics (medians, the radius, the depth exponent) are the numba
-library's own (:func:`depthnormals.ddm.support.profile_from_pairs`) on the few hundred pair
-rows per radius, so both take the same decisions. No gradients (the profile only chooses).
+library's own on the few hundred pair rows per radius
+(:func:`depthnormals.ddm.support.profiles_from_pair_tables`: the medians of every frame
+together, then the choices frame by frame, as :func:`~depthnormals.ddm.support.profile_from_pairs`
+takes them), so both take the same decisions. No gradients (the profile only chooses).
 """
 
 from __future__ import annotations
 
 import torch
 
-from ..ddm.support import MIN_VALID, RADII, SupportProfile, profile_from_pairs, sample_every, sample_step
+from ..ddm.support import (
+    MIN_VALID,
+    RADII,
+    SupportProfile,
+    profiles_from_pair_tables,
+    sample_every,
+    sample_step,
+)
 from ._boxfit import _solve
 
 __all__ = ["support_profiles"]
@@ -87,9 +96,5 @@ def support_profiles(z: torch.Tensor, cam, sigmas: list[float]) -> list[SupportP
         c = tuple(q.reshape(-1, 1).to(z.dtype).expand(b, 1) for q in cam)
         per_radius = [_pairs(zf, h, w, r, c) for r in RADII]
         host = [(rows.cpu().numpy(), ok.cpu().numpy()) for rows, ok in per_radius]
-    out = []
-    for i in range(b):
-        table = {r: rows[i][ok[i]] for r, (rows, ok) in zip(RADII, host, strict=True)}
-        out.append(profile_from_pairs(table.__getitem__, sigmas[i]))
-    return out
+    return profiles_from_pair_tables(host, sigmas)
 
