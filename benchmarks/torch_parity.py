@@ -6,11 +6,12 @@ For each frame: the numba library's ``estimate_normals(depth, K)`` (the default 
 and the pixels whose NaN differs. Frames: the five analytic scenes at 640x480, clean, with
 Gaussian noise of 0.3 footprints and with each synthetic sensor model (kinect_v1, kinect_v2,
 realsense_d4xx, tof), and every frame of a real-sensor folder (default
-``../shared/data/real-sensors``); frames of one size run as one batch with a K per frame.
+``../shared/data/real-sensors``) and, with ``--synth DIR``, the sensor columns of a synthetic
+benchmark folder (``depthnormals synth``); frames of one size run as one batch with a K per frame.
 Prints a markdown table (one row per frame kind: the worst frame) and the branch each frame
 took. Acceptance (issue 23): mean <= 0.01, p99.9 <= 0.1, no NaN difference.
 
-    python benchmarks/torch_parity.py [--device cuda] [--dtype float64] [--real DIR]
+    python benchmarks/torch_parity.py [--device cuda] [--dtype float64] [--real DIR] [--synth DIR]
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ MODELS = {"kinect_v1": sensor.kinect_v1_noise, "kinect_v2": sensor.kinect_v2_noi
           "realsense_d4xx": sensor.realsense_d4xx_noise, "tof": sensor.tof_noise}
 
 
-def frames(real: Path | None):
+def frames(real: Path | None, synth: Path | None = None):
     """(kind, name, depth, K) of every frame."""
     rng = np.random.default_rng(0)
     for name in scene_names():
@@ -43,6 +44,11 @@ def frames(real: Path | None):
         for model, fn in MODELS.items():
             z = np.asarray(fn(r.depth, r.normals, r.K, rng=np.random.default_rng(1)))
             yield f"synthetic {model}", name, z, r.K
+    if synth is not None and synth.is_dir():  # the synthetic benchmark's sensor columns
+        from depthnormals.datasets.synthetic import read_synthetic
+
+        for f in read_synthetic(synth, variants=list(MODELS)):
+            yield f"benchmark {f.meta['variant']}", f.group, f.depth, f.K
     if real is not None and real.is_dir():
         from depthnormals.datasets.realsensors import read_realsensors
 
@@ -83,6 +89,9 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--dtype", default="float64", choices=("float64", "float32"))
+    ap.add_argument("--synth", type=Path, default=None,
+                    help="a folder of `depthnormals synth` (its kinect_v1, kinect_v2, realsense_d4xx and tof "
+                         "variants are compared too)")
     ap.add_argument("--real", type=Path,
                     default=Path(__file__).resolve().parents[2] / "shared" / "data" / "real-sensors")
     args = ap.parse_args()
@@ -91,7 +100,7 @@ def main() -> None:
     card = f" ({torch.cuda.get_device_name()})" if args.device.startswith("cuda") else ""
     print(f"torch {torch.__version__}, device {args.device}{card}, {args.dtype}")
     by_shape: dict = {}
-    for fr in frames(args.real):
+    for fr in frames(args.real, args.synth):
         by_shape.setdefault((fr[0].split()[0], fr[2].shape), []).append(fr)
     t0 = time.perf_counter()
     rows = []
