@@ -273,6 +273,39 @@ def estimated_normals(depth: np.ndarray, K: dn.Intrinsics, method: str) -> np.nd
     return np.ascontiguousarray(n.transpose(0, 3, 1, 2), dtype=np.float32)
 
 
+def normal_source(name: str) -> str | None:
+    """The normal estimator an input uses (``"3f2n+"``, ``"fals"``), or None."""
+    return next((m for m in ("3f2n+", "fals") if name.endswith(m)), None)
+
+
+def views_and_normals(args: Any, inputs: Any, log) -> tuple:
+    """The training and test views (``args.train`` / ``args.test`` at ``args.size``, cached
+    in ``args.cache``, sensor noise unless ``args.clean``), the camera, and the normals of
+    every estimator the ``inputs`` use on both, with their error on the test objects (logged):
+    ``(train, test, K, normals_train, normals_test, errors)``."""
+    tr = object_views(args.train, seed=0, size=args.size, cache_dir=args.cache, log=log, noise=not args.clean)
+    te = object_views(args.test, seed=1, size=args.size, cache_dir=args.cache, log=log, noise=not args.clean)
+    K = intrinsics(args.size)
+    needed = sorted({normal_source(n) for n in inputs} - {None})
+    n_tr = {m: estimated_normals(tr["depth"], K, m) for m in needed}
+    n_te = {m: estimated_normals(te["depth"], K, m) for m in needed}
+    errors = {m: normal_error(n_te[m], te) for m in n_te}
+    log("normal error on the test objects (deg): " + ", ".join(f"{k} {v:.1f}" for k, v in errors.items()))
+    return tr, te, K, n_tr, n_te, errors
+
+
+def save_figure(fig: Any, path: Path) -> None:
+    """Lay out ``fig``, write it to ``path`` as a PNG atomically, close it."""
+    import matplotlib.pyplot as plt
+
+    from depthnormals.io import atomic_write
+
+    fig.tight_layout()
+    with atomic_write(path) as fh:
+        fig.savefig(fh, format="png", dpi=90)
+    plt.close(fig)
+
+
 def normal_error(est: np.ndarray, views: dict[str, np.ndarray], *, on_object: bool = True) -> float:
     """Mean angular error (deg) of (N, 3, H, W) normals on the object pixels where both exist."""
     e = est.transpose(0, 2, 3, 1).astype(np.float64)

@@ -45,7 +45,6 @@ from typing import Any
 import numpy as np
 
 import depthnormals as dn
-from depthnormals.io import atomic_write
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _objects as objs
@@ -59,11 +58,6 @@ N_GT_EVAL = 2048
 #: Metres to network units (decimetres).
 UNIT = 10.0
 TAUS_MM = (5.0, 10.0)
-
-
-def normal_source(name: str) -> str | None:
-    """The normal estimator an input uses (``"3f2n+"``, ``"fals"``), or None."""
-    return next((m for m in ("3f2n+", "fals") if name.endswith(m)), None)
 
 
 def clouds(
@@ -85,7 +79,7 @@ def clouds(
     gt = (pts[views["obj"]] @ R.transpose(0, 2, 1) + (t - centroid)[:, None]) * UNIT
     out = {}
     for name in names:
-        src = normal_source(name)
+        src = objs.normal_source(name)
         out[name] = np.concatenate([part] + ([objs.gather(normals[src], idx)] if src else []), 1)
         out[name] = out[name].astype(np.float32)
     return out, gt.astype(np.float32), ok
@@ -230,7 +224,7 @@ def summarise(results: dict[str, list[dict]], errors: dict[str, float]) -> tuple
                 "f1_10mm": objs.welch_p(f1, ref["f1_10mm"]),
             }
         pc, pf = (pvals[name]["cd_l1"], pvals[name]["f1_10mm"]) if name in pvals else (float("nan"),) * 2
-        src = normal_source(name)
+        src = objs.normal_source(name)
         err = f"{errors[src]:.1f}" if src in errors else "-"
         lines.append(
             f"| {name} | " + " | ".join(cells) + f" | {' / '.join(f'{v:.2f}' for v in cd)} | "
@@ -281,10 +275,7 @@ def figure(
     fig.suptitle(
         "top views (x, z in mm; camera at the bottom); red: predicted completion (seed 0)", fontsize=8
     )
-    fig.tight_layout()
-    with atomic_write(path) as fh:
-        fig.savefig(fh, format="png", dpi=90)
-    plt.close(fig)
+    objs.save_figure(fig, path)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -321,18 +312,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"[{time.perf_counter() - t0:7.1f} s] {msg}", flush=True)
 
     log(f"views: {args.train} train + {args.test} test, {args.size}x{args.size}, {len(objs.OBJECTS)} objects")
-    tr = objs.object_views(
-        args.train, seed=0, size=args.size, cache_dir=args.cache, log=log, noise=not args.clean
-    )
-    te = objs.object_views(
-        args.test, seed=1, size=args.size, cache_dir=args.cache, log=log, noise=not args.clean
-    )
-    K = objs.intrinsics(args.size)
-    needed = sorted({normal_source(n) for n in names} - {None})
-    n_tr = {m: objs.estimated_normals(tr["depth"], K, m) for m in needed}
-    n_te = {m: objs.estimated_normals(te["depth"], K, m) for m in needed}
-    errors = {m: objs.normal_error(n_te[m], te) for m in n_te}
-    log("normal error on the test objects (deg): " + ", ".join(f"{k} {v:.1f}" for k, v in errors.items()))
+    tr, te, K, n_tr, n_te, errors = objs.views_and_normals(args, names, log)
     x_tr, gt_tr, ok_tr = clouds(tr, n_tr, names, K, n_gt=N_GT_TRAIN, seed=0)
     x_te, gt_te, ok_te = clouds(te, n_te, names, K, n_gt=N_GT_EVAL, seed=1)
     x_tr, gt_tr = {k: v[ok_tr] for k, v in x_tr.items()}, gt_tr[ok_tr]

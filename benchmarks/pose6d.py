@@ -53,7 +53,6 @@ from typing import Any
 import numpy as np
 
 import depthnormals as dn
-from depthnormals.io import atomic_write
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _objects as objs
@@ -72,11 +71,6 @@ DEPTH_CENTRE = 0.8
 # ---------------------------------------------------------------- inputs
 
 
-def normal_source(name: str) -> str | None:
-    """The normal estimator an input uses (``"3f2n+"``, ``"fals"``), or None."""
-    return next((m for m in ("3f2n+", "fals") if name.endswith(m)), None)
-
-
 def image_inputs(
     views: dict, normals: dict[str, np.ndarray], names: tuple[str, ...]
 ) -> dict[str, np.ndarray]:
@@ -86,7 +80,7 @@ def image_inputs(
     depth = np.where(d > 0, d - DEPTH_CENTRE, 0.0).astype(np.float32)
     out = {}
     for name in names:
-        src = normal_source(name)
+        src = objs.normal_source(name)
         geo = ([depth] if name.startswith("rgb+depth") else []) + ([normals[src]] if src else [])
         out[name] = np.concatenate([views["rgb"], *geo, mask], axis=1)
     return out
@@ -106,7 +100,7 @@ def point_inputs(
     rgb = objs.gather(views["rgb"], idx)
     out = {}
     for name in names:
-        src = normal_source(name)
+        src = objs.normal_source(name)
         parts = [xyz, rgb] + ([objs.gather(normals[src], idx)] if src else [])
         out[name] = np.concatenate(parts, 1).astype(np.float32)
     return out, centroid.astype(np.float32)
@@ -274,7 +268,7 @@ def summarise(results: dict[str, dict[str, list[dict]]], errors: dict[str, float
             acc = np.array([r["add_acc"] for r in runs]) * 100
             p = objs.welch_p(acc, ref) if name != BASELINE[kind] else float("nan")
             pvals[kind][name] = p
-            geo = normal_source(name)
+            geo = objs.normal_source(name)
             err = f"{errors[geo]:.1f}" if geo in errors else "-"
             lines.append(
                 f"| {kind} | {name} | " + " | ".join(cells) + f" | {' / '.join(f'{v:.1f}' for v in acc)} | "
@@ -336,10 +330,7 @@ def figure(
     fig.suptitle(
         "green: model points under the true pose; red: under the image model's pose (seed 0)", fontsize=8
     )
-    fig.tight_layout()
-    with atomic_write(path) as fh:
-        fig.savefig(fh, format="png", dpi=90)
-    plt.close(fig)
+    objs.save_figure(fig, path)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -388,18 +379,7 @@ def main(argv: list[str] | None = None) -> int:
         f"views: {args.train} train + {args.test} test, {args.size}x{args.size}, "
         f"objects {', '.join(objs.OBJECTS)}"
     )
-    tr = objs.object_views(
-        args.train, seed=0, size=args.size, cache_dir=args.cache, log=log, noise=not args.clean
-    )
-    te = objs.object_views(
-        args.test, seed=1, size=args.size, cache_dir=args.cache, log=log, noise=not args.clean
-    )
-    K = objs.intrinsics(args.size)
-    needed = {normal_source(n) for k in models for n in inputs[k]} - {None}
-    n_tr = {m: objs.estimated_normals(tr["depth"], K, m) for m in sorted(needed)}
-    n_te = {m: objs.estimated_normals(te["depth"], K, m) for m in sorted(needed)}
-    errors = {m: objs.normal_error(n_te[m], te) for m in n_te}
-    log("normal error on the test objects (deg): " + ", ".join(f"{k} {v:.1f}" for k, v in errors.items()))
+    tr, te, K, n_tr, n_te, errors = objs.views_and_normals(args, [n for k in models for n in inputs[k]], log)
     model_pts = np.stack([objs.surface_points(o, LOSS_POINTS, seed=1) for o in objs.OBJECTS]).astype(
         np.float32
     )
