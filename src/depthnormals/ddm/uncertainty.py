@@ -244,15 +244,7 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
         y = cur[1]
         t = cur[2]
         if split and far_d > 0:
-            acf[:] = 0.0
-            cnf[:] = 0.0
-            if far_d < w:
-                hi = w - far_d
-                _chord_into(x[:hi], y[:hi], t[:hi], x[far_d:], y[far_d:], t[far_d:], acf[:hi],
-                            cnf[:hi])
-            if v + far_d < h:
-                o = ring[(v + far_d) % nr]
-                _chord_into(x, y, t, o[0], o[1], o[2], acf, cnf)
+            _far_chords(x, y, t, ring[(v + far_d) % nr], v + far_d < h, far_d, acf, cnf)
         if spread > 0.0:  # each neighbour pair's angle once (:func:`_spreads_rows`)
             if v == v0 and v0 > 0:
                 o = ring[(v0 - 1) % nr]
@@ -606,6 +598,21 @@ def _four_angles(x, y, t, below, v, h, scratch, acc, cnt):
         cnt[u] += rk[u - 1]
 
 
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _far_chords(x, y, t, far, has_far, far_d, acc, cnt):
+    """``acc``, ``cnt`` (reset here): the sum and count of the angles between the row's
+    normals ``x, y, t`` and those ``far_d`` to the right, and those of the row ``far_d`` below
+    (``far``, read where ``has_far``)."""
+    w = x.size
+    acc[:] = 0.0
+    cnt[:] = 0.0
+    if far_d < w:
+        hi = w - far_d
+        _chord_into(x[:hi], y[:hi], t[:hi], x[far_d:], y[far_d:], t[far_d:], acc[:hi], cnt[:hi])
+    if has_far:
+        _chord_into(x, y, t, far[0], far[1], far[2], acc, cnt)
+
+
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _spreads_rows(v0, v1, planar, far_d, out):
     """Rows ``[v0, v1)``: the mean angle (degrees) between the pixel's normal and the finite
@@ -639,15 +646,7 @@ def _spreads_rows(v0, v1, planar, far_d, out):
         for u in range(w):
             c = cnt[u]
             o[u] = dg * acc[u] / c if c > zero else zero
-        acc[:] = 0.0
-        cnt[:] = 0.0
-        if far_d < w:
-            hi = w - far_d
-            _chord_into(x[:hi], y[:hi], t[:hi], x[far_d:], y[far_d:], t[far_d:], acc[:hi],
-                        cnt[:hi])
-        if v + far_d < h:
-            a = v + far_d
-            _chord_into(x, y, t, planar[0, a], planar[1, a], planar[2, a], acc, cnt)
+        _far_chords(x, y, t, planar[:, min(v + far_d, h - 1)], v + far_d < h, far_d, acc, cnt)
         o = out[1, v]
         for u in range(w):
             c = cnt[u]
