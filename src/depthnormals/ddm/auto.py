@@ -61,6 +61,7 @@ __all__ = [
     "auto_fused",
     "box_radius",
     "box_select",
+    "branch_at",
     "needs_measured_support",
     "noise_profile",
     "noisy_select",
@@ -247,17 +248,25 @@ def _branch(z: np.ndarray, fx: float, fy: float, o: dict):
     """Which selection ``o["selection"]`` runs: ``("planes" | "box-fit" | "curvature", noise
     pass)``, the curvature selection being the clean branch of the paper's CRF / correlation.
     An explicit ``"planes"`` needs no noise estimate (the pass is then None)."""
-    sel = o["selection"]
-    if sel == "planes":
-        return sel, None
+    if o["selection"] == "planes":
+        return "planes", None
     p = noise_pass(z, fx, fy, tile=TILE)
+    return branch_at(o, p.sigma), p
+
+
+def branch_at(o: dict, sigma: float) -> str:
+    """Which selection module options ``o`` run on depth of noise ``sigma`` (footprints):
+    ``o["selection"]`` itself unless it is ``"auto"``; for ``"auto"``, ``"box-fit"`` from
+    :data:`PLANES_NOISE` (:data:`NOISE_CLEAN` with the paper's CRF or a correlation), below
+    it ``"planes"`` (``"curvature"`` with them). NaN (too few valid pixels to measure)
+    counts as clean. The one rule of the numba module and of its torch port."""
+    sel = o["selection"]
     if sel != "auto":
-        return sel, p
+        return sel
     paper = o["crf"] or o["correlation"] != "none"
-    # NaN (too few valid pixels to measure) counts as clean
-    if not p.sigma >= (NOISE_CLEAN if paper else PLANES_NOISE):
-        return ("curvature" if paper else "planes"), p
-    return "box-fit", p
+    if not sigma >= (NOISE_CLEAN if paper else PLANES_NOISE):
+        return "curvature" if paper else "planes"
+    return "box-fit"
 
 
 def refine_auto(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,

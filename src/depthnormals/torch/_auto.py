@@ -23,8 +23,8 @@ from ..ddm.auto import (
     GATE,
     KEEP_CHI2,
     NOISE_CLEAN,
-    PLANES_NOISE,
     box_radius,
+    branch_at,
     needs_measured_support,
 )
 from ..ddm.noise import TILE
@@ -42,11 +42,7 @@ def noisy_frames(z: torch.Tensor, valid: torch.Tensor, cam64, o: dict) -> tuple[
     """The noise pass of every frame (depth ``z``, valid where ``valid``) and the frames that
     take a noisy branch."""
     noise = noise_pass(z, valid, cam64[0], cam64[1], tile=TILE)
-    if o["selection"] == "box-fit":
-        return noise, list(range(z.shape[0]))
-    paper = o["crf"] or o["correlation"] != "none"
-    thr = NOISE_CLEAN if paper else PLANES_NOISE
-    return noise, [i for i, f in enumerate(noise.frames) if f.sigma >= thr]  # NaN: clean
+    return noise, [i for i, f in enumerate(noise.frames) if branch_at(o, f.sigma) == "box-fit"]
 
 
 def _col(values, like: torch.Tensor) -> torch.Tensor:
