@@ -263,34 +263,35 @@ def estimate_normals(depth: torch.Tensor, K: Any, *, method: str = "3f2n+",
     if not isinstance(return_uncertainty, bool):
         raise TypeError(f"return_uncertainty must be True or False; got {return_uncertainty!r}")
     o = _check_options(method, options)
-    z, valid, cam, out_dtype = prepare(depth, K, depth_scale)
+    on_numba = backend == "numba" or (backend == "auto" and _numba_suits(depth, K))
+    if return_uncertainty or on_numba:
+        out_dtype = prepare(depth, K, depth_scale)[3]  # (and the inputs checked)
     if return_uncertainty:
         if method != "3f2n+":
             raise ValueError(f"return_uncertainty=True needs method '3f2n+' in depthnormals.torch; got "
                              f"{method!r} (the numba library also maps fals and PCL's modes)")
         n, unc = _numba_backend(depth, K, method, depth_scale, invalid, options, out_dtype, True)
-        if not (backend == "numba" or (backend == "auto" and _numba_suits(depth, K))):
+        if not on_numba:
             n = estimate_normals(depth, K, method=method, depth_scale=depth_scale, invalid=invalid,
                                  backend="torch", **options)
         dev = depth.device
         unc = unc.to(dev)
         none = unc.new_tensor(float("nan") if invalid == "nan" else 0.0)
         return n.to(dev), torch.where(normals_mask(n), unc, none)
-    if backend == "numba" or (backend == "auto" and _numba_suits(depth, K)):
+    if on_numba:
         return _numba_backend(depth, K, method, depth_scale, invalid, options, out_dtype)
-    plus = method.endswith("+")
-    if plus and o["selection"] in ("auto", "box-fit"):
-        noise, noisy = _noise_first(depth, K, depth_scale, o)
-        # prepared again after the host read: a torch.compile'd call then traces the clean
-        # branch from the inputs, as for an explicit selection (measured: with the prepared
-        # tensors carried across the graph break, inductor's graph ran 65 instead of 44 ms a
-        # frame on one CPU thread)
-        z, valid, cam, out_dtype = prepare(depth, K, depth_scale)
-        if noisy:  # the noisy branches read float64 depth, NaN at invalid pixels
-            cam64 = tuple(c.to(torch.float64) for c in (cam.fx, cam.fy, cam.cx, cam.cy))
-            z64 = torch.where(valid, z.to(torch.float64), float("nan"))
-            return finish(*_mixed(z, valid, cam, z64, cam64, noise, noisy, base, method, o),
-                          invalid, out_dtype)
+    auto = method.endswith("+") and o["selection"] in ("auto", "box-fit")
+    noise, noisy = _noise_first(depth, K, depth_scale, o) if auto else (None, [])
+    # prepared after the host read of the noise pass: a torch.compile'd call then traces the
+    # clean branch from the inputs, as for an explicit selection (measured: with the prepared
+    # tensors carried across the graph break, inductor's graph ran 65 instead of 44 ms a frame
+    # on one CPU thread)
+    z, valid, cam, out_dtype = prepare(depth, K, depth_scale)
+    if noisy:  # the noisy branches read float64 depth, NaN at invalid pixels
+        cam64 = tuple(c.to(torch.float64) for c in (cam.fx, cam.fy, cam.cx, cam.cy))
+        z64 = torch.where(valid, z.to(torch.float64), float("nan"))
+        return finish(*_mixed(z, valid, cam, z64, cam64, noise, noisy, base, method, o),
+                      invalid, out_dtype)
     return finish(*_clean(z, valid, cam, base, method, o), invalid, out_dtype)
 
 
@@ -366,8 +367,8 @@ def _numba_suits(depth: torch.Tensor, K: Any) -> bool:
     """``backend="auto"``: the numba library computes where it gives the same answer faster
     and nothing is lost: a CPU tensor, no gradient asked for (of the depth or of tensor
     intrinsics)."""
-    if depth.device.type != "cpu":
-        return False
+    if not isinstance(depth, torch.Tensor) or depth.device.type != "cpu":
+        return False  # (not a tensor: the torch path's checks say what is accepted)
     if torch.is_grad_enabled() and (depth.requires_grad or (isinstance(K, torch.Tensor) and K.requires_grad)):
         return False
     return not (isinstance(K, torch.Tensor) and K.device.type != "cpu")
