@@ -276,24 +276,59 @@ def profile_from_pairs(pairs, sigma: float, *, target: float = TARGET_ERROR) -> 
     """The statistics of :func:`support_profile` from the adjacent-window pairs:
     ``pairs(r)`` gives, for a radius of :data:`RADII`, the rows (angle between the two
     normals in degrees, the larger residual variance, the depth at the first window's
-    centre), in any order (the torch port computes them on the device and hands them here,
-    so both take the same decisions)."""
+    centre), in any order; it is asked for radii smallest first, and no further than the
+    search goes."""
+
+    def stats(k: int) -> tuple:
+        out = pairs(RADII[k])
+        n, measured, resid, keep = _radius_stats(out[None], np.ones((1, out.shape[0]), dtype=bool))
+        return n[0], measured[0], resid[0], out[keep[0]]
+
+    return _choose_profile(stats, sigma, target)
+
+
+def profiles_from_pair_tables(tables: list[tuple[np.ndarray, np.ndarray]],
+                              sigmas: list[float], *,
+                              target: float = TARGET_ERROR) -> list[SupportProfile]:
+    """:func:`profile_from_pairs` for a batch of frames at once: ``tables[k] = (rows (B, P, 3),
+    ok (B, P))`` the pairs of radius ``RADII[k]`` of every frame (rows where ``ok``), ``sigmas``
+    the frames' noise levels. The medians of every frame and radius are computed together,
+    the choices frame by frame: the same profiles as one call of :func:`profile_from_pairs`
+    per frame (tested); the torch port computes the pairs on the device and hands them here,
+    so both libraries take the same decisions."""
+    per = [_radius_stats(rows, ok) for rows, ok in tables]
+
+    def frame(f: int):
+        return lambda k: (per[k][0][f], per[k][1][f], per[k][2][f], tables[k][0][f][per[k][3][f]])
+
+    return [_choose_profile(frame(f), sigma, target) for f, sigma in enumerate(sigmas)]
+
+
+def _radius_stats(rows: np.ndarray, ok: np.ndarray) -> tuple:
+    """Per frame (rows (B, P, 3) of one radius, present where ``ok``): the number of pairs,
+    the measured mean error of one fit (:data:`PAIR_TO_ERROR` times the median angle of the
+    pairs whose larger residual is at most the median one: edges drop out), the median
+    residual of those, and which they are (B, P)."""
+    ang, res = rows[..., 0], rows[..., 1]
+    keep = ok & (res <= _row_medians(res, ok)[:, None])
+    return ok.sum(axis=1), PAIR_TO_ERROR * _row_medians(ang, keep), _row_medians(res, keep), keep
+
+
+def _choose_profile(stats, sigma: float, target: float) -> SupportProfile:
+    """The radius search of :func:`support_profile`: ``stats(k)`` gives, for radius
+    ``RADII[k]``, ``(pairs, measured error, median residual, kept rows)``; radii are read
+    smallest first, up to the first with too few pairs or whose error reaches ``target``."""
     radii, errors, residuals, kept, meas, pred = [], [], [], [], [], []
-    for r in RADII:
-        every = sample_every(r)
-        out = pairs(r)
-        k = out.shape[0]
-        if k < MIN_PAIRS:
+    for k, r in enumerate(RADII):
+        n, measured, resid, rows = stats(k)
+        if n < MIN_PAIRS:
             break
-        ang, res = out[:, 0], out[:, 1]
-        keep = res <= float(np.median(res))
-        measured = PAIR_TO_ERROR * float(np.median(ang[keep]))
         radii.append(r)
-        meas.append(measured)
-        pred.append(predicted_error(sigma, r, every))
-        errors.append(max(measured, predicted_error(sigma, r)))
-        residuals.append(float(np.median(res[keep])))
-        kept.append(out[keep])
+        meas.append(float(measured))
+        pred.append(predicted_error(sigma, r, sample_every(r)))
+        errors.append(max(float(measured), predicted_error(sigma, r)))
+        residuals.append(float(resid))
+        kept.append(rows)
         if errors[-1] <= target:
             break
     if not radii:
@@ -317,49 +352,6 @@ def _row_medians(x: np.ndarray, ok: np.ndarray) -> np.ndarray:
     hi = srt[i, np.clip(n // 2, 0, x.shape[1] - 1)]
     med = np.where(n % 2 == 1, hi, np.mean(np.stack([lo, hi]), axis=0))
     return np.where(n > 0, med, np.nan)
-
-
-def profiles_from_pair_tables(tables: list[tuple[np.ndarray, np.ndarray]],
-                              sigmas: list[float], *,
-                              target: float = TARGET_ERROR) -> list[SupportProfile]:
-    """:func:`profile_from_pairs` for a batch of frames at once: ``tables[k] = (rows (B, P, 3),
-    ok (B, P))`` the pairs of radius ``RADII[k]`` of every frame (rows where ``ok``), ``sigmas``
-    the frames' noise levels. The medians of every frame and radius are computed together
-    (:func:`_row_medians`, numpy's own arithmetic), the choices frame by frame: the same
-    profiles as one call of :func:`profile_from_pairs` per frame (tested)."""
-    per_radius = []
-    for rows, ok in tables:
-        n = ok.sum(axis=1)
-        ang, res = rows[..., 0], rows[..., 1]
-        med_res = _row_medians(res, ok)
-        keep = ok & (res <= med_res[:, None])
-        per_radius.append((n, PAIR_TO_ERROR * _row_medians(ang, keep), _row_medians(res, keep), keep))
-    out = []
-    for f, sigma in enumerate(sigmas):
-        radii, errors, residuals, meas, pred, keeps = [], [], [], [], [], []
-        for k, r in enumerate(RADII):
-            n, measured, resid, keep = per_radius[k]
-            if n[f] < MIN_PAIRS:
-                break
-            radii.append(r)
-            meas.append(float(measured[f]))
-            pred.append(predicted_error(sigma, r, sample_every(r)))
-            errors.append(max(float(measured[f]), predicted_error(sigma, r)))
-            residuals.append(float(resid[f]))
-            keeps.append(k)
-            if errors[-1] <= target:
-                break
-        if not radii:
-            out.append(SupportProfile((1,), (float("nan"),), (0.0,), 1, measured=(float("nan"),),
-                                      predicted=(0.0,)))
-            continue
-        i = next((j for j, e in enumerate(errors) if e <= target), int(np.argmin(errors)))
-        k = keeps[i]
-        kept = tables[k][0][f][per_radius[k][3][f]]
-        zref, gamma = depth_exponent(kept[:, 1], kept[:, 2])
-        out.append(SupportProfile(tuple(radii), tuple(errors), tuple(residuals), radii[i], zref,
-                                  gamma, tuple(meas), tuple(pred)))
-    return out
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
