@@ -190,12 +190,33 @@ def quantisation_step(z: np.ndarray, fx: float, fy: float) -> tuple[float, float
     steps = np.empty((h // QUANT_STRIDE + 1) * w + (w // QUANT_STRIDE + 1) * h)
     tested, zero, n = _plateau_samples(z, float(fx), float(fy), QUANT_STRIDE, QUANT_SPAN,
                                        QUANT_EDGE, steps)
+    return quantisation_from_counts(tested, zero, n,
+                                    lambda: float(np.partition(steps[:n], n // 2)[n // 2]))
+
+
+def quantisation_from_counts(tested: int, zero: int, n_steps: int, step_median) -> tuple[float, float]:
+    """The plateau search's verdict from its counts: ``(share, step)`` (:func:`quantisation_step`);
+    ``step_median()`` gives the upper median of the ``n_steps`` non-zero steps, asked for only
+    when the depth is quantised. The one rule of the numba pass and of its torch port."""
     if tested == 0:
         return float("nan"), 0.0
     share = zero / tested
-    if share < QUANT_SHARE or n == 0:
+    if share < QUANT_SHARE or n_steps == 0:
         return share, 0.0
-    return share, float(np.partition(steps[:n], n // 2)[n // 2])
+    return share, step_median()
+
+
+def iid_level(median: float, n: int) -> float:
+    """The second-difference level (footprints) from the upper median of ``n`` samples
+    ``|second difference| f z`` (the MAD rule of the module doc); NaN without a sample."""
+    return median / (_MAD * _SQRT6) if n else float("nan")
+
+
+def combined_level(iid: float, step: float) -> tuple[float, float]:
+    """``(quant, sigma)``: the rounding noise ``step / sqrt(12)`` of quantised depth and the
+    level every branch reads, ``iid`` and it in quadrature (``iid`` alone when not quantised)."""
+    quant = step / _SQRT12
+    return quant, (math.hypot(iid, quant) if quant > 0.0 else iid)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -233,10 +254,9 @@ class NoiseSamples:
         self._shape = shape
         n = every.size
         # numpy's selection (a copy: the tiles' samples stay in place)
-        self.iid = _median_nonneg(every) / (_MAD * _SQRT6) if n else float("nan")
+        self.iid = iid_level(_median_nonneg(every), n) if n else float("nan")
         self.quant_share, self.quant_step = quant
-        self.quant = self.quant_step / _SQRT12
-        self.sigma = math.hypot(self.iid, self.quant) if self.quant > 0.0 else self.iid
+        self.quant, self.sigma = combined_level(self.iid, self.quant_step)
 
     def tiles(self) -> np.ndarray:
         """Every tile's level, footprints (tiles down, across), NaN below :data:`TILE_MIN`:

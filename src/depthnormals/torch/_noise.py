@@ -13,19 +13,25 @@ levels stay on the device until the i.i.d. box-fit asks for them. No gradients.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import torch
 
-from ..ddm.noise import QUANT_EDGE, QUANT_SHARE, QUANT_SPAN, QUANT_STRIDE, TILE, TILE_MIN, TILE_STRIDE
+from ..ddm.noise import (
+    _MAD,
+    _SQRT6,
+    QUANT_EDGE,
+    QUANT_SPAN,
+    QUANT_STRIDE,
+    TILE,
+    TILE_MIN,
+    TILE_STRIDE,
+    combined_level,
+    iid_level,
+    quantisation_from_counts,
+)
 
-__all__ = ["FrameNoise", "noise_pass", "tile_levels"]
-
-_MAD = 0.6744897501960817  # median of |N(0, 1)|, as ddm.noise
-_SQRT6 = 6.0 ** 0.5
-_SQRT12 = 12.0 ** 0.5
-
+__all__ = ["FrameNoise", "noise_pass"]
 
 @dataclass(frozen=True)
 class FrameNoise:
@@ -210,18 +216,9 @@ def noise_pass(z: torch.Tensor, valid: torch.Tensor, fx: torch.Tensor, fy: torch
                            1).cpu().tolist()
     frames = []
     for kth, cnt, tst, zr, nnz, skth in host:
-        iid = kth / (_MAD * _SQRT6) if cnt > 0 else float("nan")
-        if tst == 0:
-            share, step = float("nan"), 0.0
-        else:
-            share = zr / tst
-            step = 0.0 if (share < QUANT_SHARE or nnz == 0) else skth
-        quant = step / _SQRT12
-        sigma = math.hypot(iid, quant) if quant > 0.0 else iid
+        iid = iid_level(kth, cnt)
+        share, step = quantisation_from_counts(tst, zr, nnz, lambda skth=skth: skth)
+        quant, sigma = combined_level(iid, step)
         frames.append(FrameNoise(iid, share, step, quant, sigma))
     return BatchNoise(frames, samples, ((h + tile - 1) // tile, (w + tile - 1) // tile))
 
-
-def tile_levels(noise: BatchNoise, index: torch.Tensor) -> torch.Tensor:
-    """The tile levels of the frames ``index`` (:meth:`BatchNoise.tiles`)."""
-    return noise.tiles(index)
