@@ -26,6 +26,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
+from ..ddm.auto import _slopes as _auto_slopes
 from ..ddm.boxfit import LOCAL_CAP, MIN_POINTS, SHIFTS
 from ..kernels.eig3 import sym3_adjugate_apply
 from ._common import shift as _at
@@ -37,6 +38,8 @@ _SHIFTS = [tuple(int(x) for x in s) for s in SHIFTS]  # (dv, du), the centred wi
 #: the numba kernel's adjugate of the normal equations, its Python body run on tensors (the same
 #: formula, elementwise; read once here, so torch.compile traces a plain function)
 _ADJUGATE = sym3_adjugate_apply.py_func
+#: the inverse-depth slopes of a normal (:func:`depthnormals.ddm.auto._slopes`), likewise
+_SLOPES = _auto_slopes.py_func
 
 
 def _f32(x: torch.Tensor) -> torch.Tensor:
@@ -321,14 +324,11 @@ def keep_estimator(base, out, zs, kappa: torch.Tensor, cam):
     A = torch.arange(w, dtype=zs.dtype, device=zs.device).reshape(1, 1, w) - cx
     B = torch.arange(h, dtype=zs.dtype, device=zs.device).reshape(1, h, 1) - cy
     with torch.no_grad():
-        def slopes(x, y, t):
-            g = x * A / fx + y * B / fy + t
-            g = torch.where(g == 0, torch.ones_like(g), g)
-            return x / fx / g, y / fy / g
-
-        # both as the numba kernels store them (float32)
-        pa, pb = slopes(*(q.detach().float().to(zs.dtype) for q in base[:3]))
-        qa, qb = slopes(*(q.detach().float().to(zs.dtype) for q in out[:3]))
+        ifx, ify = 1.0 / fx, 1.0 / fy
+        # both as the numba kernels store them (float32), their slopes by the kernel's formula
+        # (a zero denominator gives inf / NaN there as here: never kept)
+        pa, pb = _SLOPES(*(q.detach().float().to(zs.dtype) for q in base[:3]), A, B, ifx, ify)
+        qa, qb = _SLOPES(*(q.detach().float().to(zs.dtype) for q in out[:3]), A, B, ifx, ify)
         keep = base[3] & out[3] & ((pa - qa) ** 2 + (pb - qb) ** 2 < kappa)
     nx, ny, nz = (torch.where(keep, p.to(q.dtype), q) for p, q in zip(base[:3], out[:3], strict=True))
     return _ray_facing(nx, ny, nz, cam, base[3] & out[3])
