@@ -28,6 +28,7 @@ import depthnormals.torch as dt
 from depthnormals.analytic import make_scene, scene_names
 from depthnormals.evaluate import machine_description
 from depthnormals.synth import noise as sensor
+from depthnormals.synth.noise import _rays as unit_rays
 
 MODELS = {"kinect_v1": sensor.kinect_v1_noise, "kinect_v2": sensor.kinect_v2_noise,
           "realsense_d4xx": sensor.realsense_d4xx_noise, "tof": sensor.tof_noise}
@@ -56,13 +57,6 @@ def frames(real: Path | None, synth: Path | None = None):
             yield f"real {f.group}", f.name, f.depth, f.K
 
 
-def _rays(shape, K):
-    cam = dn.as_intrinsics(K)
-    v, u = np.mgrid[0:shape[0], 0:shape[1]]
-    r = np.stack([(u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, np.ones(shape)], axis=-1)
-    return r / np.linalg.norm(r, axis=-1, keepdims=True)
-
-
 def compare(batch, device: str, dtype) -> list[tuple]:
     """One batch of frames of one size: per frame (kind, name, branch, mean, p99.9, NaN diffs)."""
     depths = [d.astype(dtype) for _, _, d, _ in batch]
@@ -77,7 +71,7 @@ def compare(batch, device: str, dtype) -> list[tuple]:
         na, nb = np.isnan(a).any(-1), np.isnan(b).any(-1)
         err = dn.angular_error(a[~na][None].astype(np.float64), b[~na][None])[0]
         # a normal perpendicular to its ray has no defined side: compare lines there
-        grazing = np.abs(np.einsum("...i,...i->...", a[~na], _rays(d.shape, K)[~na])) < 1e-6
+        grazing = np.abs(np.einsum("...i,...i->...", a[~na], unit_rays(d.shape, K)[~na])) < 1e-6
         err = np.nan_to_num(np.where(grazing, np.minimum(err, 180.0 - err), err), nan=180.0)
         mean = float(err.mean()) if err.size else 0.0
         p999 = float(np.percentile(err, 99.9)) if err.size else 0.0

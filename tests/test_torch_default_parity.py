@@ -20,6 +20,7 @@ import depthnormals as dn
 import depthnormals.torch as dt
 from depthnormals.analytic import make_scene, scene_names
 from depthnormals.synth import noise as sensor
+from depthnormals.synth.noise import _rays as unit_rays
 
 K_SMALL = (131.25, 131.25, 79.5, 59.5)  # 160 x 120 at the field of view of 525 / 640 x 480
 MODELS = {"kinect_v1": sensor.kinect_v1_noise, "kinect_v2": sensor.kinect_v2_noise,
@@ -44,18 +45,12 @@ def _check(depths, Ks, label, **options):
         # a normal perpendicular to its viewing ray (|cos| < 1e-6: a plane through the camera,
         # the stairs' risers seen edge-on) has no defined orientation: both libraries decide it
         # by rounding, so compare lines there (as tests/test_torch_parity.py)
-        grazing = np.abs(np.einsum("...i,...i->...", a[~na], _unit_rays(z, K)[~na])) < 1e-6
+        rays = unit_rays(z.shape, dn.as_intrinsics(K))[~na]
+        grazing = np.abs(np.einsum("...i,...i->...", a[~na], rays)) < 1e-6
         err = np.where(grazing, np.minimum(err, 180.0 - err), err)
         if err.size:
             mean, p999 = float(err.mean()), float(np.percentile(err, 99.9))
             assert mean <= 0.01 and p999 <= 0.1, f"{label}[{i}]: mean {mean:.2e}, p99.9 {p999:.2e} deg"
-
-
-def _unit_rays(z, K):
-    cam = dn.as_intrinsics(K)
-    v, u = np.mgrid[0:z.shape[0], 0:z.shape[1]]
-    r = np.stack([(u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, np.ones(z.shape)], axis=-1)
-    return r / np.linalg.norm(r, axis=-1, keepdims=True)
 
 
 def _frames():
