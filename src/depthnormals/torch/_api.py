@@ -10,7 +10,7 @@ import torch
 from torch import nn
 
 from .._validate import check_int, check_real
-from ._auto import noisy_frames, noisy_select
+from ._auto import frames_of, in_order, noisy_frames, noisy_select
 from ._common import Camera, Grid, finish, prepare
 from ._d2nt import VARIANTS, d2nt
 from ._ddm import refine
@@ -332,7 +332,7 @@ def _clean(z, valid, cam: Camera, base: str, method: str, o: dict[str, Any]):
 
 
 def _cam_sub(cam: Camera, idx: torch.Tensor) -> Camera:
-    return Camera(*(c if c.shape[0] == 1 else c[idx] for c in (cam.fx, cam.fy, cam.cx, cam.cy, cam.a, cam.b)))
+    return Camera(*frames_of((cam.fx, cam.fy, cam.cx, cam.cy, cam.a, cam.b), idx))
 
 
 def _mixed(z, valid, cam: Camera, z64, cam64, noise, noisy: list[int], base: str, method: str,
@@ -355,12 +355,7 @@ def _mixed(z, valid, cam: Camera, z64, cam64, noise, noisy: list[int], base: str
         ct = torch.tensor(clean, device=dev)
         parts.append(_clean(z[ct], valid[ct], _cam_sub(cam, ct), base, method, o))
         order += clean
-    res = tuple(torch.cat(q) for q in zip(*parts, strict=True))
-    if order != list(range(b)):
-        inv = torch.empty(b, dtype=torch.long)
-        inv[torch.tensor(order)] = torch.arange(b)
-        res = tuple(q[inv.to(dev)] for q in res)
-    return res
+    return in_order(parts, order, dev)
 
 
 def _numba_suits(depth: torch.Tensor, K: Any) -> bool:

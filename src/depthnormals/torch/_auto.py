@@ -35,7 +35,7 @@ from ._boxfit import box_fits, choose_least, choose_local, choose_plain, keep_es
 from ._noise import BatchNoise, noise_pass
 from ._support import support_profiles
 
-__all__ = ["noisy_frames", "noisy_select"]
+__all__ = ["frames_of", "in_order", "noisy_frames", "noisy_select"]
 
 
 def noisy_frames(z: torch.Tensor, valid: torch.Tensor, cam64, o: dict) -> tuple[BatchNoise, list[int]]:
@@ -49,7 +49,8 @@ def _col(values, like: torch.Tensor) -> torch.Tensor:
     return torch.tensor(values, dtype=torch.float64, device=like.device).reshape(-1, 1, 1)
 
 
-def _sub(cam64, idx: torch.Tensor):
+def frames_of(cam64, idx: torch.Tensor):
+    """The camera tensors (B or 1, ...) of the frames ``idx`` (a shared one stays as it is)."""
     return tuple(c if c.shape[0] == 1 else c[idx] for c in cam64)
 
 
@@ -121,7 +122,7 @@ def noisy_select(z64: torch.Tensor, valid: torch.Tensor, cam64, noise: BatchNois
     fr = [noise.frames[i] for i in frames]
     idx_all = torch.tensor(frames, device=dev)
     zsub, vsub = z64[idx_all], valid[idx_all]
-    csub = _sub(cam64, idx_all)
+    csub = frames_of(cam64, idx_all)
     profiles = support_profiles(zsub, csub, [f.sigma for f in fr])
     groups: dict[tuple, list[int]] = {}
     for j, (f, p) in enumerate(zip(fr, profiles, strict=True)):
@@ -134,7 +135,7 @@ def noisy_select(z64: torch.Tensor, valid: torch.Tensor, cam64, noise: BatchNois
     parts, order = [], []
     for (kind, r, _), js in groups.items():
         jt = torch.tensor(js, device=dev)
-        zg, vg, cg = zsub[jt], vsub[jt], _sub(csub, jt)
+        zg, vg, cg = zsub[jt], vsub[jt], frames_of(csub, jt)
         if kind == "iid":
             out = _iid(zg, vg, cg, noise, idx_all[jt], [fr[j] for j in js], r)
             suu = (2 * r + 1) ** 2 * r * (r + 1) / 3.0
@@ -152,9 +153,15 @@ def noisy_select(z64: torch.Tensor, valid: torch.Tensor, cam64, noise: BatchNois
             out = keep_estimator(tuple(q[jt] for q in base), out, torch.where(vg, zg, 1.0), kappa, cg)
         parts.append(out)
         order.extend(js)
+    return in_order(parts, order, dev)
+
+
+def in_order(parts: list[tuple], order: list[int], device) -> tuple:
+    """The outputs ``parts`` of groups of frames, concatenated and put back in frame order:
+    ``order`` lists the frame (0 .. n - 1) of every concatenated row."""
     res = tuple(torch.cat(q) for q in zip(*parts, strict=True))
     if order != sorted(order):
         inv = torch.empty(len(order), dtype=torch.long)
         inv[torch.tensor(order)] = torch.arange(len(order))
-        res = tuple(q[inv.to(dev)] for q in res)
+        res = tuple(q[inv.to(device)] for q in res)
     return res
