@@ -243,9 +243,10 @@ def test_spreads_match_numpy_in_any_bands(split):
             U._fit_error_rows(v0, v1, z, n, np.ones((41, 53), np.float32), 0, tiles,
                               (1.0, 0, 1.0, False, 1.0), (np.full((1, 1), np.inf, np.float32),
                                                           0.0, 1.0), (40.0, 40.0, 26.0, 20.0),
-                              np.empty((41, 53), np.float32), out, big)
+                              np.empty((41, 53), np.float32), out, big,
+                              (np.empty((2, 1, 1), np.float32), 0, np.empty((1, 1), np.float32)))
     else:
-        planar = np.ascontiguousarray(n.transpose(2, 0, 1))
+        planar = np.ascontiguousarray(n.transpose(0, 2, 1))  # (H, 3, W)
         for v0, v1 in bands:
             U._spreads_rows(v0, v1, planar, big, out)
     ok = np.isfinite(n[..., 0])

@@ -25,7 +25,7 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
   the four neighbours' normals to the pixel's, the mean angle ``s_R`` of the normals ``R``
   (the large radius) to the right and below, and the density of quantisation steps over the
   large window, times ``1 + g`` (the density of depth jumps) and a factor where ``e`` exceeds
-  three times its frame median (the large window refused) (:func:`_box_rows`,
+  three times its frame median (the large window refused) (:func:`_box_product`,
   :data:`BOX_MAP`): where the window choice flips between surfaces the error is a wrong
   window, not noise, and the spreads see it;
 - **the measured support** (``support_select``), self-calibrated on the frame: the level
@@ -44,7 +44,7 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
   (a facet narrower than two pixels: no one-sided stencil fits), the least angle between them.
 
 Vectorised passes per image (:func:`_fit_error_rows`, :func:`_spreads_rows`,
-:func:`_edge_integrals`, :func:`_support_rows`, :func:`_box_rows`, :func:`_spread_rows`) over
+:func:`_edge_integrals`, :func:`_support_rows`, :func:`_spread_rows`) over
 quantities the branches already computed; the densities are read on every second row and
 column of the map's grid. Conversions to the von
 Mises-Fisher concentration of Bae et al. (ICCV 2021): :func:`uncertainty_to_kappa`,
@@ -123,13 +123,14 @@ SUPPORT_MAP = (1.2115, 0.461)
 SUPPORT_POW = (1, 4, 3, 4)
 SPREAD_LEVEL = 0.1
 LEVEL_FLOOR = 0.5
-#: Box-fit branch: ``C e^k0 med^k1 s_1^k2 s_R^k3 (STEP_OFFSET + steps)^k4 (1 + g jumps)``,
-#: ``e`` the i.i.d. fit error of the pixel's window, ``med`` its median over the frame (every
-#: :data:`MEDIAN_STEP`-th row and column); ``BOX_MAP = (C, g)``.
+#: Box-fit branch: ``C e^k0 s_1^k1 s_R^k2 (STEP_OFFSET + steps)^k3 (1 + g jumps)``, ``e`` the
+#: i.i.d. fit error of the pixel's window; ``BOX_MAP = (C, g)``. (The fit gave the frame's
+#: median ``med`` of ``e`` the exponent 0: it only enters through :data:`BOX_HIGH`.)
 BOX_MAP = (2.0735, 2.311)
-BOX_POW = (3, 0, 4, 1, -2)
-#: Box-fit branch: where ``e`` exceeds ``BOX_HIGH[0]`` times ``med`` (the large window refused:
-#: the small one's error, near an edge) the map is ``BOX_HIGH[1]`` times the product.
+BOX_POW = (3, 4, 1, -2)
+#: Box-fit branch: where ``e`` exceeds ``BOX_HIGH[0]`` times ``med``, its median over the frame
+#: (every :data:`MEDIAN_STEP`-th row and column) (the large window refused: the small one's
+#: error, near an edge), the map is ``BOX_HIGH[1]`` times the product.
 BOX_HIGH = (3.0, 0.7085)
 MEDIAN_STEP = 7
 #: The box-fit branch reads its jump and step densities on every ``2^BOX_SUB``-th row and
@@ -152,7 +153,7 @@ def _min_into(a, out_best):
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, out, sp_out,
-                    far_d):
+                    far_d, box):
     """Rows ``[v0, v1)`` of the plane-fit error map (module doc), degrees, into ``out`` (H, W).
 
     Reads ``normals`` (H, W, 3) (NaN: ``out`` NaN), ``score`` (H', W') the residual variances
@@ -170,7 +171,11 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
     score: none); ``cam = (fx, fy, cx, cy)``. With ``sp_out`` (2, H, W) (not (1, 1, 1)) the
     mean angle (degrees) of the four neighbours goes to ``sp_out[0]`` instead of into the
     error, and that of the normals ``far_d`` to the right and below to ``sp_out[1]`` (the
-    ring of planar rows then ``far_d + 2`` deep). Every loop runs along a row."""
+    ring of planar rows then ``far_d + 2`` deep). With ``box = (sub, sh, out_map)``,
+    ``out_map`` (H, W) (not (1, 1)), those two spreads stay apart likewise and the box-fit
+    branch's map, but for its high-error factor, goes to ``out_map``
+    (:func:`_box_product`, ``sub`` and ``sh`` as :func:`_half_row` reads them): one pass
+    instead of writing the spreads and reading them back. Every loop runs along a row."""
     e0t, vart, tile = tiles
     zref, half, floor, tilt, spread = depth
     big_s, big_gate, big_ratio = big
@@ -188,7 +193,10 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
     e0r = np.empty(w, dtype=f32)
     varr = np.empty(w, dtype=f32)
     split = sp_out.shape[1] == h
-    ahead = far_d if split and far_d > 1 else 1
+    sub, sh, out_map = box
+    boxed = out_map.shape[0] == h
+    apart = split or boxed  # the spreads kept apart from the error
+    ahead = far_d if apart and far_d > 1 else 1
     nr = ahead + 2
     ring = np.empty((nr, 3, w), dtype=f32)  # rows v - 1 .. v + ahead of the normals, planar
     acc = np.empty(w, dtype=f32)
@@ -201,11 +209,14 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
     dk = np.zeros(w, dtype=f32)
     ua = np.zeros(w, dtype=f32)
     uk = np.zeros(w, dtype=f32)
+    s0r = np.zeros(w, dtype=f32)  # the row's two spreads, degrees
+    s1r = np.zeros(w, dtype=f32)
+    f2 = np.empty((2, w), dtype=f32)  # the row's densities (box)
     for a in range(max(0, v0 - 1), min(h, v0 + ahead)):
         _planar_row(normals, a, ring[a % nr])
     rx = ((np.arange(w) - cx) / fx).astype(f32)
     dg = f32(180.0 / math.pi)
-    sw = f32(0.0 if split else spread)  # split: the spread goes to sp_out, not the error
+    sw = f32(0.0 if apart else spread)  # apart: the spread goes to sp_out / the map
     deg = f32(math.degrees(RAYLEIGH_MEAN))
     fl = f32(floor)
     one = f32(1.0)
@@ -243,7 +254,7 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
         x = cur[0]
         y = cur[1]
         t = cur[2]
-        if split and far_d > 0:
+        if apart and far_d > 0:
             _far_chords(x, y, t, ring[(v + far_d) % nr], v + far_d < h, far_d, acf, cnf)
         if spread > 0.0:  # each neighbour pair's angle once (:func:`_spreads_rows`)
             if v == v0 and v0 > 0:
@@ -273,7 +284,7 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
             ratio = res[u] / var if var > f32(0.0) else one
             ratio = ratio if ratio > fl else fl
             ratio = ratio if ratio < cap else cap
-            e = e0r[u] * np.sqrt(ratio)
+            e = e0r[u]
             if tilt:  # |e_x - (e_x . n) n|^2 = |e_x|^2 - (e_x . n)^2, e_x = (1, 0, -rx)
                 r_ = rx[u]
                 g = abs(nx * r_ + ny * ry + nz)
@@ -283,19 +294,24 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
                 sy = one + ry * ry - dy * dy
                 sx = sx if sx > f32(0.0) else f32(0.0)
                 sy = sy if sy > f32(0.0) else f32(0.0)
-                e *= g * np.sqrt(f32(0.5) * (sx + sy))
+                e *= g  # one square root for the ratio and the tilt
+                ratio *= f32(0.5) * (sx + sy)
             m = cnt[u] if spread > 0.0 else one
             sp = dg * acc[u] / m if (spread > 0.0) & (m > f32(0.0)) else f32(0.0)
-            e = deg * e
+            e = deg * e * np.sqrt(ratio)
             out[v, u] = np.sqrt(e * e + sw * sp * sp) if ok else nan
-        if split:
-            s0 = sp_out[0, v]
-            s1 = sp_out[1, v]
+        if apart:
             for u in range(w):
                 c = cnt[u]
-                s0[u] = dg * acc[u] / c if c > f32(0.0) else f32(0.0)
+                s0r[u] = dg * acc[u] / c if c > f32(0.0) else f32(0.0)
                 c = cnf[u]
-                s1[u] = dg * acf[u] / c if c > f32(0.0) else f32(0.0)
+                s1r[u] = dg * acf[u] / c if c > f32(0.0) else f32(0.0)
+        if split:
+            sp_out[0, v, :] = s0r
+            sp_out[1, v, :] = s1r
+        if boxed:
+            _half_row(sub, v, sh, f2)
+            _box_product(out[v], s0r, s1r, f2[0], f2[1], out_map[v])
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -422,36 +438,36 @@ def _support_rows(v0, v1, z, normals, model, ctx, out):
             out[v, u] = lev[u] if nx == nx else nan
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _box_rows(v0, v1, e0, med, ctx, out):
-    """Rows ``[v0, v1)`` of the box-fit branch's map (degrees): per pixel the product of
-    powers (:data:`BOX_MAP`, :data:`BOX_POW`, :data:`BOX_HIGH`) of its noise error ``e0``
-    (NaN where the normal is NaN), the frame's median one ``med`` and
-    ``ctx = (s1, far, sub)`` of :func:`_context`. Every loop runs along a row."""
-    s1, far, sub, sh = ctx
-    w = e0.shape[1]
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _box_product(er, s1r, s3r, jr, sr, out):
+    """One row of the box-fit branch's map (degrees) but for its high-error factor: per pixel
+    the product of powers (:data:`BOX_MAP`, :data:`BOX_POW`) of its noise error ``er`` (NaN
+    where the normal is NaN), the neighbours' spread ``s1r``, the spread ``R`` away ``s3r``
+    and the jump and step densities ``jr``, ``sr``."""
     f32 = np.float32
     fl = f32(SPREAD_FLOOR)
     k = BOX_POW
-    pm = _ipow(f32(med), k[1])
-    e_high = f32(BOX_HIGH[0] * med)
-    f2 = np.empty((2, w), dtype=f32)
+    for u in range(out.size):
+        e = er[u]
+        x1 = s1r[u] if s1r[u] > fl else fl
+        x3 = s3r[u] if s3r[u] > fl else fl
+        p = _ipow(e, k[0]) * _ipow(x1, k[1]) * _ipow(x3, k[2])
+        p *= _ipow(f32(STEP_OFFSET) + sr[u], k[3])
+        g = f32(BOX_MAP[0]) * (f32(1.0) + f32(BOX_MAP[1]) * jr[u])
+        out[u] = g * _root8(p)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _high_rows(v0, v1, e0, e_high, factor, out):
+    """Rows ``[v0, v1)``: ``out *= factor`` where the noise error ``e0`` exceeds ``e_high``
+    (:data:`BOX_HIGH`: the large window refused)."""
+    hi = np.float32(e_high)
+    f = np.float32(factor)
     for v in range(v0, v1):
-        _half_row(sub, v, sh, f2)
         er = e0[v]
-        s1r = s1[v]
-        s3 = far[0, v]
-        jr = f2[0]
-        sr = f2[1]
-        for u in range(w):
-            e = er[u]
-            x1 = s1r[u] if s1r[u] > fl else fl
-            x3 = s3[u] if s3[u] > fl else fl
-            p = _ipow(e, k[0]) * pm * _ipow(x1, k[2]) * _ipow(x3, k[3])
-            p *= _ipow(f32(STEP_OFFSET) + sr[u], k[4])
-            g = f32(BOX_MAP[0]) * (f32(1.0) + f32(BOX_MAP[1]) * jr[u])
-            g = g * f32(BOX_HIGH[1]) if e > e_high else g
-            out[v, u] = g * _root8(p)
+        o = out[v]
+        for u in range(o.size):
+            o[u] = o[u] * f if er[u] > hi else o[u]
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -502,6 +518,8 @@ def _edge_integrals(z, rel, out_jump, out_steps):
     sv = np.zeros(w, dtype=f32)
     jp = np.zeros(w, dtype=f32)  # the pair (v - 1, v)
     spv = np.zeros(w, dtype=f32)
+    jr = np.empty(w, dtype=f32)  # the row's two indicators
+    tr = np.empty(w, dtype=f32)
     out_jump[0, :] = 0.0
     out_steps[0, :] = 0.0
     for v in range(h):
@@ -527,7 +545,15 @@ def _edge_integrals(z, rel, out_jump, out_steps):
         else:
             jv[:] = 0.0
             sv[:] = 0.0
-        rj = zero
+        for u in range(w):  # the vertical pairs and the pixel itself
+            x = a[u]
+            j = zero if x == x else one
+            jr[u] = max(j, jv[u], jp[u])
+            tr[u] = sv[u] + spv[u]
+        if w > 1:  # the horizontal pairs: (u - 1, u) and (u, u + 1)
+            _max_add_into(jh[:w - 1], sh[:w - 1], jr[1:], tr[1:])
+            _max_add_into(jh[:w - 1], sh[:w - 1], jr[:w - 1], tr[:w - 1])
+        rj = zero  # the running sums (exact: small integers in float32)
         rs = zero
         pj = out_jump[v]
         ps = out_steps[v]
@@ -536,20 +562,20 @@ def _edge_integrals(z, rel, out_jump, out_steps):
         qj[0] = 0.0
         qs[0] = 0.0
         for u in range(w):
-            x = a[u]
-            j = zero if x == x else one
-            j = max(j, jv[u], jp[u])
-            t = sv[u] + spv[u]
-            if u > 0:
-                j = max(j, jh[u - 1])
-                t += sh[u - 1]
-            if u + 1 < w:
-                j = max(j, jh[u])
-                t += sh[u]
-            rj += j
-            rs += t
+            rj += jr[u]
+            rs += tr[u]
             qj[u + 1] = pj[u + 1] + rj
             qs[u + 1] = ps[u + 1] + rs
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _max_add_into(j, t, out_j, out_t):
+    """``out_j = max(out_j, j)``, ``out_t += t`` elementwise (slices from 0: it vectorises)."""
+    for i in range(out_j.size):
+        a = out_j[i]
+        b = j[i]
+        out_j[i] = a if a > b else b
+        out_t[i] += t[i]
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -619,9 +645,11 @@ def _spreads_rows(v0, v1, planar, far_d, out):
     normals of its four neighbours (``out[0]``) and of the pixels ``far_d`` to the right and
     below (``out[1]``), 0 without one. Each neighbour pair's angle is computed once (the left
     one is the right one of the pixel to the left, the one above the one below of the row
-    above). ``planar``: the normals (3, H, W). Every loop runs along a row over contiguous
+    above). ``planar``: the normals by row (H, 3, W), so that a row's three components are
+    one C-contiguous block (a (3, W) slice of (3, H, W) is strided, and the loops reading it
+    ran scalar, 5x slower). Every loop runs along a row over contiguous
     memory."""
-    h, w = planar.shape[1:]
+    h, w = planar.shape[0], planar.shape[2]
     f32 = np.float32
     zero = f32(0.0)
     dg = f32(180.0 / math.pi)
@@ -634,19 +662,19 @@ def _spreads_rows(v0, v1, planar, far_d, out):
     acc = np.empty(w, dtype=f32)
     cnt = np.empty(w, dtype=f32)
     if v0 > 0:
-        _angle_into(planar[0, v0 - 1], planar[1, v0 - 1], planar[2, v0 - 1], planar[0, v0],
-                    planar[1, v0], planar[2, v0], da, dk)
+        _angle_into(planar[v0 - 1, 0], planar[v0 - 1, 1], planar[v0 - 1, 2], planar[v0, 0],
+                    planar[v0, 1], planar[v0, 2], da, dk)
     for v in range(v0, v1):
-        x = planar[0, v]
-        y = planar[1, v]
-        t = planar[2, v]
-        _four_angles(x, y, t, planar[:, min(v + 1, h - 1)], v, h, (ra, rk, da, dk, ua, uk), acc,
+        x = planar[v, 0]
+        y = planar[v, 1]
+        t = planar[v, 2]
+        _four_angles(x, y, t, planar[min(v + 1, h - 1)], v, h, (ra, rk, da, dk, ua, uk), acc,
                      cnt)
         o = out[0, v]
         for u in range(w):
             c = cnt[u]
             o[u] = dg * acc[u] / c if c > zero else zero
-        _far_chords(x, y, t, planar[:, min(v + far_d, h - 1)], v + far_d < h, far_d, acc, cnt)
+        _far_chords(x, y, t, planar[min(v + far_d, h - 1)], v + far_d < h, far_d, acc, cnt)
         o = out[1, v]
         for u in range(w):
             c = cnt[u]
@@ -665,6 +693,14 @@ def _box_cols(w, r, lo, hi, inv):
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
+def _window_sums(bd, ad, bc, ac, iv, inv, out):
+    """``out = (bd - ad - bc + ac) (iv inv)`` elementwise: window means from the integral
+    image's rows ``b``, ``a`` at the columns ``d``, ``c``."""
+    for i in range(out.size):
+        out[i] = (bd[i] - ad[i] - bc[i] + ac[i]) * (iv * inv[i])
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def _box_row(ii, v, r, lo, hi, inv, out):
     """Row ``v`` of the mean over the clipped ``(2 r + 1)^2`` windows of the integral image
     ``ii`` (H + 1, W + 1) into ``out`` (columns from :func:`_box_cols`)."""
@@ -674,25 +710,38 @@ def _box_row(ii, v, r, lo, hi, inv, out):
     ra = ii[a]
     rb = ii[b]
     iv = np.float32(1.0) / np.float32(b - a)
-    for u in range(out.size):
+    w = out.size
+    i0 = min(r, w)  # columns whose window is clipped at the left, and from i1 at the right
+    i1 = max(i0, w - r - 1)
+    for u in range(i0):
+        c = lo[u]
+        d = hi[u]
+        out[u] = (rb[d] - ra[d] - rb[c] + ra[c]) * (iv * inv[u])
+    if i1 > i0:  # lo = u - r, hi = u + r + 1: slices from 0, so it vectorises
+        _window_sums(rb[i0 + r + 1:i1 + r + 1], ra[i0 + r + 1:i1 + r + 1], rb[i0 - r:i1 - r],
+                     ra[i0 - r:i1 - r], iv, inv[i0:i1], out[i0:i1])
+    for u in range(i1, w):
         c = lo[u]
         d = hi[u]
         out[u] = (rb[d] - ra[d] - rb[c] + ra[c]) * (iv * inv[u])
 
 
-def _context(zg, ng, big: int, spreads=None, shift: int = 1) -> tuple:
-    """What both noisy maps read besides their noise term, on the grid of their choice
+def _context(zg, ng, big: int, shift: int = 1) -> tuple:
+    """What the measured support's map reads besides its level, on the grid of its choice
     (depth ``zg``, normals ``ng``): the mean angle of the normals of the four neighbours
-    (H, W) and of the pixels ``big`` to the right and below (1, H, W) (:func:`_spreads_rows`;
-    ``spreads`` (2, H, W) when already known); on every ``2^shift``-th row and column of that grid
-    (the radius divided alike) the means over the large window of the depth jumps and
-    quantisation steps (:func:`_edge_integrals`), (2, H', W')."""
-    if spreads is None:
-        h, w = zg.shape
-        planar = np.ascontiguousarray(ng.transpose(2, 0, 1))
-        spreads = np.empty((2, h, w), dtype=np.float32)
-        run_rows(_spreads_rows, h, planar, max(1, big), spreads, min_rows=16)
-    s1, far = spreads[0], spreads[1:]
+    (H, W) and of the pixels ``big`` to the right and below (1, H, W) (:func:`_spreads_rows`),
+    and :func:`_densities` on every ``2^shift``-th row and column of that grid."""
+    h, w = zg.shape
+    planar = np.ascontiguousarray(ng.transpose(0, 2, 1))
+    spreads = np.empty((2, h, w), dtype=np.float32)
+    run_rows(_spreads_rows, h, planar, max(1, big), spreads, min_rows=16)
+    return spreads[0], spreads[1:], _densities(zg, big, shift), shift
+
+
+def _densities(zg, big: int, shift: int) -> np.ndarray:
+    """The means over the large window (radius ``big``) of the depth jumps and quantisation
+    steps of the depth grid ``zg`` (:func:`_edge_integrals`), on its every ``2^shift``-th row
+    and column (the radius divided alike): (2, H', W')."""
     st = 1 << shift
     zs = np.ascontiguousarray(zg[::st, ::st])
     hs, ws = zs.shape
@@ -701,7 +750,7 @@ def _context(zg, ng, big: int, spreads=None, shift: int = 1) -> tuple:
     ist = np.empty((hs + 1, ws + 1), dtype=np.float32)
     _edge_integrals(zs, JUMP_REL, ij, ist)
     _box_planes(ij, ist, max(1, big // st), sub[0], sub[1])
-    return s1, far, sub, shift
+    return sub
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -720,11 +769,17 @@ def _box_planes(ij, ist, r, out_j, out_s):
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
 def _planar_row(normals, v, out3):
-    """Row ``v`` of ``normals`` (H, W, 3) into ``out3`` (3, W)."""
-    for u in range(normals.shape[1]):
-        out3[0, u] = normals[v, u, 0]
-        out3[1, u] = normals[v, u, 1]
-        out3[2, u] = normals[v, u, 2]
+    """Row ``v`` of ``normals`` (H, W, 3) C-contiguous into ``out3`` (3, W), read as one flat
+    row (a constant stride of 3: the loop vectorises, 3.6x faster than 3-d indexing)."""
+    w = normals.shape[1]
+    r = normals[v].reshape(3 * w)
+    x = out3[0]
+    y = out3[1]
+    t = out3[2]
+    for u in range(w):
+        x[u] = r[3 * u]
+        y[u] = r[3 * u + 1]
+        t[u] = r[3 * u + 2]
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -806,14 +861,17 @@ def _tile_maps(z: np.ndarray, fx: float, fy: float, sigma: float, r: int,
 
 
 def _fit_error(z, normals, score, shift, tiles, depth, big, cam, sp_out=None,
-               far_d: int = 0) -> np.ndarray:
+               far_d: int = 0, box=None) -> np.ndarray:
     out = np.empty(z.shape, dtype=np.float32)
     if big is None:
         big = (np.full((1, 1), np.inf, dtype=np.float32), 0.0, 1.0)
     if sp_out is None:
         sp_out = np.empty((1, 1, 1), dtype=np.float32)
+    if box is None:
+        box = (np.empty((2, 1, 1), dtype=np.float32), 0, np.empty((1, 1), dtype=np.float32))
+    normals = np.ascontiguousarray(normals, dtype=np.float32)
     run_rows(_fit_error_rows, z.shape[0], z, normals, score, int(shift), tiles, depth, big, cam,
-             out, sp_out, int(far_d), min_rows=16)
+             out, sp_out, int(far_d), box, min_rows=16)
     return out
 
 
@@ -842,14 +900,13 @@ def _box_branch(z, cam, sigma, levels, prof):
     e0, var, tile = _tile_maps(z, fx, fy, sigma, r, levels, NOISE_CLEAN)
     tiles = (e0 * _excess_at(prof, r), var, tile)
     bigs = (big_s, GATE, math.sqrt(_full_suu(r) / _full_suu(big))) if big > r else None
-    sp = np.empty((2, *z.shape), dtype=np.float32)
-    e0 = _fit_error(z, out, score, r, tiles, (1.0, 0, 1.0, True, 1.0), bigs, cam, sp, big)
+    unc = np.empty(z.shape, dtype=np.float32)
+    box = (_densities(z, big, BOX_SUB), BOX_SUB, unc)
+    e0 = _fit_error(z, out, score, r, tiles, (1.0, 0, 1.0, True, 1.0), bigs, cam, None, big, box)
     sub = e0[::MEDIAN_STEP, ::MEDIAN_STEP]
     sub = sub[np.isfinite(sub)]
-    med = float(np.median(sub)) if sub.size else 1.0
-    ctx = _context(z, out, big, sp, BOX_SUB)
-    unc = np.empty(z.shape, dtype=np.float32)
-    run_rows(_box_rows, z.shape[0], e0, max(med, 1e-6), ctx, unc, min_rows=16)
+    med = max(float(np.median(sub)) if sub.size else 1.0, 1e-6)
+    run_rows(_high_rows, z.shape[0], e0, BOX_HIGH[0] * med, BOX_HIGH[1], unc, min_rows=16)
     return out, unc
 
 
