@@ -288,6 +288,33 @@ def test_edge_integrals_match_numpy():
     v, u = 12, 0  # a window clipped at the left edge: rows 10..14, columns 0..2
     assert mj[v, u] == pytest.approx(jump[10:15, 0:3].mean())
     assert ms[v, u] == pytest.approx(steps[10:15, 0:3].mean())
+    for v in range(z.shape[0]):  # every window, clipped at any border or not
+        for u in range(z.shape[1]):
+            rows, cols = slice(max(0, v - 2), v + 3), slice(max(0, u - 2), u + 3)
+            assert mj[v, u] == pytest.approx(jump[rows, cols].mean(), rel=1e-6)
+            assert ms[v, u] == pytest.approx(steps[rows, cols].mean(), rel=1e-6)
+
+
+def test_box_fit_ramp_and_high_factor():
+    """The box-fit branch's last pass: times ``BOX_HIGH[1]`` where the noise error exceeds
+    its bound, then the monotone ramp ``BOX_RAMP``: unchanged up to 8 deg, x1.125 at 12 deg,
+    x1.25 from 16 deg; NaN stays NaN."""
+    from depthnormals.ddm import uncertainty as U
+
+    a, m0, m1 = U.BOX_RAMP
+    assert (a, m0, m1) == (0.25, 8.0, 16.0)
+    m = np.array([[1.0, 8.0, 12.0, 16.0, 40.0, np.nan, 20.0]], np.float32)
+    e = np.array([[0.1, 0.1, 0.1, 0.1, 0.1, 0.1, 5.0]], np.float32)  # the last one high
+    out = m.copy()
+    U._box_final_rows(0, 1, e, 1.0, out)
+    hi = 20.0 * U.BOX_HIGH[1]
+    want = [1.0, 8.0, 12.0 * 1.125, 20.0, 50.0, np.nan,
+            hi * (1.0 + a * min(1.0, max(0.0, (hi - m0) / (m1 - m0))))]
+    np.testing.assert_allclose(out[0], want, rtol=1e-6)
+    ramp = np.linspace(0.0, 60.0, 601, dtype=np.float32)[None]
+    r = ramp.copy()
+    U._box_final_rows(0, 1, np.zeros_like(ramp), 1.0, r)
+    assert np.all(np.diff(r[0]) > 0)  # monotone: the ranking is unchanged
 
 
 def test_real_frame_held_out(shared_data):
