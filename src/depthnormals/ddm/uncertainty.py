@@ -311,11 +311,8 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
             e = deg * e * np.sqrt(ratio)
             out[v, u] = np.sqrt(e * e + sw * sp * sp) if ok else nan
         if apart:
-            for u in range(w):
-                c = cnt[u]
-                s0r[u] = dg * acc[u] / c if c > f32(0.0) else f32(0.0)
-                c = cnf[u]
-                s1r[u] = dg * acf[u] / c if c > f32(0.0) else f32(0.0)
+            _mean_degrees(acc, cnt, s0r)
+            _mean_degrees(acf, cnf, s1r)
         if split:
             sp_out[0, v, :] = s0r
             sp_out[1, v, :] = s1r
@@ -670,8 +667,6 @@ def _spreads_rows(v0, v1, planar, far_d, out):
     memory."""
     h, w = planar.shape[0], planar.shape[2]
     f32 = np.float32
-    zero = f32(0.0)
-    dg = f32(180.0 / math.pi)
     ra = np.zeros(w, dtype=f32)  # angle to the right neighbour, and whether defined
     rk = np.zeros(w, dtype=f32)
     da = np.zeros(w, dtype=f32)  # to the one below: this row's and the row above's
@@ -689,15 +684,20 @@ def _spreads_rows(v0, v1, planar, far_d, out):
         t = planar[v, 2]
         _four_angles(x, y, t, planar[min(v + 1, h - 1)], v, h, (ra, rk, da, dk, ua, uk), acc,
                      cnt)
-        o = out[0, v]
-        for u in range(w):
-            c = cnt[u]
-            o[u] = dg * acc[u] / c if c > zero else zero
+        _mean_degrees(acc, cnt, out[0, v])
         _far_chords(x, y, t, planar[min(v + far_d, h - 1)], v + far_d < h, far_d, acc, cnt)
-        o = out[1, v]
-        for u in range(w):
-            c = cnt[u]
-            o[u] = dg * acc[u] / c if c > zero else zero
+        _mean_degrees(acc, cnt, out[1, v])
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _mean_degrees(acc, cnt, out):
+    """``out`` = the mean angle in degrees, ``acc / cnt`` (radians summed over ``cnt``
+    angles), 0 where there is none."""
+    f32 = np.float32
+    dg = f32(180.0 / math.pi)
+    for u in range(out.size):
+        c = cnt[u]
+        out[u] = dg * acc[u] / c if c > f32(0.0) else f32(0.0)
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -879,13 +879,14 @@ def _tile_maps(z: np.ndarray, fx: float, fy: float, sigma: float, r: int,
     return e0, np.ascontiguousarray(t * t), TILE
 
 
-def _fit_error(z, normals, score, shift, tiles, depth, big, cam, sp_out=None,
-               far_d: int = 0, box=None) -> np.ndarray:
+def _fit_error(z, normals, score, shift, tiles, depth, big, cam, far_d: int = 0,
+               box=None) -> np.ndarray:
+    """The plane-fit error map of :func:`_fit_error_rows` (no spreads written out: the box-fit
+    branch's go into its map through ``box``)."""
     out = np.empty(z.shape, dtype=np.float32)
     if big is None:
         big = (np.full((1, 1), np.inf, dtype=np.float32), 0.0, 1.0)
-    if sp_out is None:
-        sp_out = np.empty((1, 1, 1), dtype=np.float32)
+    sp_out = np.empty((1, 1, 1), dtype=np.float32)
     if box is None:
         box = (np.empty((2, 1, 1), dtype=np.float32), 0, np.empty((1, 1), dtype=np.float32))
     normals = np.ascontiguousarray(normals, dtype=np.float32)
@@ -921,7 +922,7 @@ def _box_branch(z, cam, sigma, levels, prof):
     bigs = (big_s, GATE, math.sqrt(_full_suu(r) / _full_suu(big))) if big > r else None
     unc = np.empty(z.shape, dtype=np.float32)
     box = (_densities(z, big, BOX_SUB), BOX_SUB, unc)
-    e0 = _fit_error(z, out, score, r, tiles, (1.0, 0, 1.0, True, 1.0), bigs, cam, None, big, box)
+    e0 = _fit_error(z, out, score, r, tiles, (1.0, 0, 1.0, True, 1.0), bigs, cam, big, box)
     sub = e0[::MEDIAN_STEP, ::MEDIAN_STEP]
     sub = sub[np.isfinite(sub)]
     med = max(float(np.median(sub)) if sub.size else 1.0, 1e-6)
