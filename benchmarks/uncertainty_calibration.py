@@ -16,10 +16,15 @@ Columns:
   model (and ``clean``);
 - ``real/<folder>``: the real frames of ``../shared/data/real-sensors`` against their plane
   references (``plane_reference`` with ``sensor_threshold``; interiors and rims), and ``real``
-  over all of them.
+  over all of them;
+- with ``--planes``, each synthetic sensor column split as the real frames are scored:
+  ``synth-planes/<variant>`` the pixels of the plane reference found on the noisy depth
+  (interiors and rims, the structured-light threshold) and ``synth-off/<variant>`` the rest,
+  both against the exact normals (no target: a diagnosis of where the map misses, the real
+  frames having no reference off their planes).
 
     python benchmarks/uncertainty_calibration.py [--method 3f2n+] [--synth /tmp/u-synth]
-        [--real ../shared/data/real-sensors] [--json OUT] [--figure PNG] [--speed]
+        [--real ../shared/data/real-sensors] [--planes] [--json OUT] [--figure PNG] [--speed]
 
 ``--speed``: instead, the single-thread time of ``method`` with and without the map on every
 real frame and one frame per synthetic variant (median of 7, interleaved per frame), and the
@@ -128,15 +133,25 @@ def analytic_columns(method: str, noise: float, seed: int) -> dict[str, Column]:
     return {"analytic": col}
 
 
-def synth_columns(root: Path, method: str) -> dict[str, Column]:
+def synth_columns(root: Path, method: str, planes: bool = False,
+                  seed: int = 0) -> dict[str, Column]:
+    """One column per sensor model of the synthetic folder ``root``; with ``planes`` also
+    its pixels on and off the plane reference of the noisy depth (module doc)."""
     from depthnormals.datasets.synthetic import read_synthetic
+    from depthnormals.evaluate import plane_reference, sensor_threshold
 
     cols: dict[str, Column] = {}
     for f in read_synthetic(root):
         variant = f.meta.get("variant", f.group.rsplit("/", 1)[-1])
         n, u = dn.estimate_normals(f.depth, f.K, method=method, return_uncertainty=True)
-        cols.setdefault(f"synth/{variant}", Column()).add(u, dn.angular_error(n, f.normals),
-                                                          f.mask)
+        err = dn.angular_error(n, f.normals)
+        cols.setdefault(f"synth/{variant}", Column()).add(u, err, f.mask)
+        if planes and variant != "clean":
+            ref = plane_reference(f.depth, f.K, seed=seed, threshold=sensor_threshold({}))
+            on = ref.interior | ref.rim
+            keep = np.ones(on.shape, dtype=bool) if f.mask is None else f.mask
+            cols.setdefault(f"synth-planes/{variant}", Column()).add(u, err, keep & on)
+            cols.setdefault(f"synth-off/{variant}", Column()).add(u, err, keep & ~on)
     return cols
 
 
@@ -201,6 +216,13 @@ def speed(method: str, synth: Path | None, real: str, repeats: int = 25) -> None
         print(f"all frames: x{total[1] / total[0]:.2f}")
 
 
+def _order(name: str) -> tuple:
+    """Columns in print order: analytic, then per sensor model all, on and off planes."""
+    kind, _, variant = name.partition("/")
+    return (kind != "analytic", variant, ("synth", "synth-planes", "synth-off").index(kind)
+            if kind.startswith("synth") else 0)
+
+
 def _print(name: str, s: dict) -> None:
     print(f"\n{name}: {s['pixels']} px, Spearman {s['spearman']:.3f}, mean predicted "
           f"{s['mean_predicted']:.3f} deg, observed {s['mean_observed']:.3f} deg, "
@@ -218,7 +240,7 @@ def _figure(results: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    names = [k for k, v in results.items() if v["bins"]]
+    names = [k for k, v in results.items() if v["bins"] and not k.startswith(("synth-p", "synth-o"))]
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 5))
     top = 0.0
     for k in names:
@@ -237,7 +259,11 @@ def _figure(results: dict, path: Path) -> None:
     bx.axvline(0.5, color="grey", ls=":", lw=0.8)
     bx.set_xlabel("Spearman rank correlation")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    from depthnormals.io import atomic_write
+
+    with atomic_write(path) as fh:
+        fig.savefig(fh, dpi=120, format="png")
+    plt.close(fig)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -250,13 +276,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--figure", type=Path, default=None)
     ap.add_argument("--speed", action="store_true", help="time with and without the map instead")
+    ap.add_argument("--planes", action="store_true",
+                    help="also score the synthetic columns on and off their plane reference")
     a = ap.parse_args(argv)
     if a.speed:
         speed(a.method, a.synth, a.real)
         return 0
     cols = analytic_columns(a.method, a.noise, a.seed)
     if a.synth is not None:
-        cols.update(synth_columns(a.synth, a.method))
+        cols = {k: c for k, c in sorted({**cols, **synth_columns(a.synth, a.method, a.planes,
+                                                                  a.seed)}.items(),
+                                        key=lambda kv: _order(kv[0]))}
     if a.real and Path(a.real).exists():
         cols.update(real_columns(Path(a.real), a.method, a.seed))
     results = {k: c.summary() for k, c in cols.items()}
@@ -271,9 +301,12 @@ def main(argv: list[str] | None = None) -> int:
         verdict = "" if t is None else ("  pass" if not why else f"  FAIL: {', '.join(why)}")
         print(f"  {k:40s} {s['spearman']:6.3f}  {s['bins_passed']}/{len(s['bins'])}{verdict}")
     if a.json is not None:
-        a.json.write_text(json.dumps({"method": a.method, "noise": a.noise, "seed": a.seed,
-                                      "synth": str(a.synth), "real": str(a.real),
-                                      "columns": results}, indent=1))
+        from depthnormals.io import write_bytes_atomic
+
+        write_bytes_atomic(a.json, json.dumps({"method": a.method, "noise": a.noise,
+                                               "seed": a.seed, "synth": str(a.synth),
+                                               "real": str(a.real), "columns": results},
+                                              indent=1).encode())
     if a.figure is not None:
         _figure(results, a.figure)
     return 0

@@ -336,3 +336,25 @@ def test_real_frame_held_out(shared_data):
     rank = np.corrcoef(np.argsort(np.argsort(p)), np.argsort(np.argsort(o)))[0, 1]
     assert rank >= 0.55, rank
     assert abs(p.mean() - o.mean()) <= 0.25 * o.mean(), (p.mean(), o.mean())
+
+
+def test_calibration_bench_splits_synthetic_on_and_off_planes(tmp_path, load_benchmark):
+    """``benchmarks/uncertainty_calibration.py --planes``: each noisy synthetic column is
+    split into the pixels of the plane reference found on its noisy depth and the rest, so the
+    two together are exactly the column (no pixel lost or counted twice), the clean column is
+    not split, and both parts of a room scene have pixels."""
+    from depthnormals.camera import Intrinsics
+    from depthnormals.synth import generate
+
+    generate(tmp_path, indoor=1, outdoor=0, views=1, seed=3, K=Intrinsics(91.375, 91.375, 63.5, 52.5),
+             size=(106, 128), progress=False, noise=("kinect_v1",))
+    bench = load_benchmark("uncertainty_calibration")
+    cols = {k: c.summary() for k, c in bench.synth_columns(tmp_path, "3f2n+", planes=True).items()}
+    assert set(cols) == {"synth/clean", "synth/kinect_v1", "synth-planes/kinect_v1",
+                         "synth-off/kinect_v1"}
+    on, off = cols["synth-planes/kinect_v1"]["pixels"], cols["synth-off/kinect_v1"]["pixels"]
+    assert on > 0 and off > 0
+    assert on + off == cols["synth/kinect_v1"]["pixels"]
+    assert [bench._order(k) < bench._order(j) for k, j in
+            (("analytic", "synth/kinect_v1"), ("synth/kinect_v1", "synth-planes/kinect_v1"),
+             ("synth-planes/kinect_v1", "synth-off/kinect_v1"))] == [True] * 3
