@@ -185,20 +185,79 @@ def test_correlated_quantised_plane_mean_prediction(seed):
     a product of the spreads (docs/benchmarks.md 17): the fitted exponents give the frame's
     interior level 1/8, and on a plane alone the spreads are small; the floor
     ``LEVEL_FLOOR lev`` keeps it above half the level."""
-    r = tilted_plane((0.0, -0.6, -0.8), 2.0).render(shape=(240, 320))
-    rng = np.random.default_rng(seed)
-    e = rng.standard_normal((240 + 8, 320 + 8))
-    k = np.ones(9) / 3.0
-    e = np.apply_along_axis(lambda x: np.convolve(x, k, "valid"), 0, e)
-    e = np.apply_along_axis(lambda x: np.convolve(x, k, "valid"), 1, e)
-    disp = 580 * 0.075 / r.depth + 0.05 * e
-    d = 580 * 0.075 / (np.round(disp * 8) / 8)
+    r, d = _kinect_like_plane(seed)
     assert dn.noise_profile(d, r.K).branch == "measured-support"
     n, u = dn.estimate_normals(d, r.K, return_uncertainty=True)
     err = dn.angular_error(n, r.normals)
     ok = np.isfinite(err)
     pred, obs = float(np.mean(u[ok])), float(np.mean(err[ok]))
     assert 0.65 * obs <= pred <= 0.8 * obs, (pred, obs)
+
+
+
+def _kinect_like_plane(seed, shape=(240, 320)):
+    """A tilted plane 2 m away seen as Kinect-like depth: disparity noise correlated over a
+    9x9 box, quantised to 1/8 px."""
+    r = tilted_plane((0.0, -0.6, -0.8), 2.0).render(shape=shape)
+    rng = np.random.default_rng(seed)
+    e = rng.standard_normal((shape[0] + 8, shape[1] + 8))
+    k = np.ones(9) / 3.0
+    e = np.apply_along_axis(lambda x: np.convolve(x, k, "valid"), 0, e)
+    e = np.apply_along_axis(lambda x: np.convolve(x, k, "valid"), 1, e)
+    disp = 580 * 0.075 / r.depth + 0.05 * e
+    return r, 580 * 0.075 / (np.round(disp * 8) / 8)
+
+
+@pytest.mark.parametrize("method", ["fals", "pcl-covariance-matrix", "pcl-average-3d-gradient"])
+def test_plain_map_self_calibrates_on_correlated_quantised_depth(method, monkeypatch):
+    """The plain fits' i.i.d. closed form reads 0.46x (FALS), 0.18x (PCL's covariance) and
+    0.27x (3-D gradients) the observed mean on Kinect-like depth; raised by the frame's
+    measured excess (``_pair_excess``: interior pairs 41 px apart) it reads 1.00-1.02x,
+    0.88-0.90x and 0.97x (seeds 0-2)."""
+    from depthnormals.ddm import uncertainty as U
+
+    r, d = _kinect_like_plane(0)
+    n, u = dn.estimate_normals(d, r.K, method=method, return_uncertainty=True)
+    err = dn.angular_error(n, r.normals)
+    ok = np.isfinite(err)
+    pred, obs = float(np.mean(u[ok])), float(np.mean(err[ok]))
+    assert 0.8 * obs <= pred <= 1.2 * obs, (pred, obs)
+    monkeypatch.setattr(U, "_pair_excess", lambda *a: 1.0)
+    _, u0 = dn.estimate_normals(d, r.K, method=method, return_uncertainty=True)
+    assert float(np.mean(u0[ok])) < 0.5 * obs  # the i.i.d. form alone: far too low
+
+
+def test_pair_excess_is_one_on_iid_noise_and_reads_a_scaled_map():
+    """On a plane with independent noise the pairs agree with the i.i.d. map (the factor
+    stays 1: only correlated noise raises it); a map made 3x too low reads about 3."""
+    from depthnormals.ddm import uncertainty as U
+    from depthnormals.ddm.boxfit import box_fit_windows
+    from depthnormals.kernels.depth import prepare
+
+    r, d = _plane(0.3, shape=(240, 320))
+    n, u = dn.estimate_normals(d, r.K, method="fals", return_uncertainty=True)
+    z, cam = prepare(d, r.K, None)
+    _, score = box_fit_windows(z, float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy), 2,
+                               normals=False)
+    assert U._pair_excess(n, u, score) < 1.1
+    assert 2.6 < U._pair_excess(n, u / 3.0, score) < 3.4
+
+
+
+def test_plain_map_takes_no_excess_on_clean_depth(monkeypatch):
+    """On clean depth the interior pairs' angles are the scene's curvature, not noise (the
+    factor read 37-355 on the clean synthetic renders): the plain map stays the i.i.d. one."""
+    from depthnormals.analytic import make_scene
+    from depthnormals.ddm import uncertainty as U
+
+    r = make_scene("sphere-before-wall").render()
+    _, u = dn.estimate_normals(r.depth, r.K, method="fals", return_uncertainty=True)
+    monkeypatch.setattr(U, "_pair_excess", lambda *a: 100.0)
+    _, u100 = dn.estimate_normals(r.depth, r.K, method="fals", return_uncertainty=True)
+    np.testing.assert_array_equal(u, u100)
+    rp, d = _kinect_like_plane(0)  # while on noisy depth the factor is applied
+    _, un = dn.estimate_normals(d, rp.K, method="fals", return_uncertainty=True)
+    assert np.nanmax(un) == pytest.approx(U.PLAIN_CAP)
 
 
 def _angle_ref(n, dv, du):

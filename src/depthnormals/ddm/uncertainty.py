@@ -18,6 +18,12 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
   that hold the pixel standing for the chosen one), inflated by ``sqrt(residual / sigma^2)``
   where the window's residual variance exceeds the noise (a chi-square test: a window across
   two surfaces is biased as well as noisy);
+- for the plain fits (FALS, PCL's modes) that map is then raised by the frame's own measured
+  excess (:func:`_pair_excess`): the median, over pairs of plane-interior pixels
+  :data:`PLAIN_SPAN` apart, of the angle between their normals over the angle the map
+  predicts for the pair; on correlated or quantised depth the i.i.d. form is 2-6x low, on
+  independent noise the factor stays 1 (at most :data:`PLAIN_CAP` degrees where it raises;
+  not on clean depth);
 - on the box-fit branch the noise error ``e`` is first scaled by how far the fit error
   measured on the depth exceeds the i.i.d. prediction at the box radius (:func:`_excess_at`, at
   least 1: noise correlated over a pixel or so); the map is then a product of powers (in
@@ -105,6 +111,22 @@ SPAN = 4
 PAIR_GRID = 6
 #: Fewest interior pairs for :func:`_interior_error`; with fewer the profile's error stands.
 MIN_PAIRS = 30
+#: Plain fits (FALS, PCL's modes): the interior pairs of :func:`_pair_excess` are this many
+#: pixels apart, and a pixel is interior where its window's residual is at most
+#: ``PLAIN_GATE`` times the frame's median. Chosen on the real training folders
+#: (nyu_registered, tum_kinect1) and synthetic seed 0 with FALS (docs/benchmarks.md, section
+#: 17): pairs 11-21 px apart still share the sensor's correlated noise (the real frames' map
+#: stayed 1.15-1.35x low), 61-81 px apart they pick up the scene's curvature (the i.i.d.
+#: Gaussian column's level rose 8-17 %; 2 % at 41 px).
+PLAIN_SPAN = 41
+PLAIN_GATE = 2.0
+#: Plain fits: the measured excess raises the map to at most this (degrees), about the mean
+#: error of a window across two perpendicular surfaces (where the i.i.d. map is already above
+#: it, it stands). Without it the top decile read 0.34-0.51x (PCL's 3-D gradients, real
+#: frames and kinect_v1: the excess times a residual-inflated edge error); with it 0.73-0.89x.
+PLAIN_CAP = 45.0
+#: The median of a Rayleigh distribution per unit of its mean: ``sqrt(2 ln 2) / sqrt(pi / 2)``.
+RAYLEIGH_MEDIAN = math.sqrt(2.0 * math.log(2.0)) / math.sqrt(math.pi / 2.0)
 #: Both noisy maps are products of powers (exponents in eighths, :func:`_root8`) of their
 #: features (module doc): the noise level, the mean angles of the normals next to the pixel
 #: (``s_1``) and ``R`` away (``s_R``, at least :data:`SPREAD_FLOOR` degrees), the density of
@@ -985,15 +1007,56 @@ def _clean_branch(z, cam, sigma):
     return out, unc
 
 
+def _pair_excess(normals, m, score) -> float:
+    """How far the error of a plain fit's normals exceeds its i.i.d. map ``m`` in plane
+    interiors, measured on the frame (at least 1; 1 with fewer than :data:`MIN_PAIRS` pairs).
+
+    Pixels on a grid of :data:`PAIR_GRID` whose window's residual ``score`` is at most
+    :data:`PLAIN_GATE` times its frame median are paired with those :data:`PLAIN_SPAN`
+    pixels to the right and below; two independent isotropic errors of means ``m_a``, ``m_b``
+    (Rayleigh) give an angle between the normals of mean ``sqrt(m_a^2 + m_b^2)`` and median
+    :data:`RAYLEIGH_MEDIAN` times that, so the median of ``angle / sqrt(m_a^2 + m_b^2)`` over
+    the pairs, divided by :data:`RAYLEIGH_MEDIAN`, is the factor by which the map's noise
+    level is low (the median: pairs across two planes are few and do not move it)."""
+    h, w = m.shape
+    ok = np.isfinite(score) & np.isfinite(m)
+    if not ok.any():
+        return 1.0
+    inside = ok & (score <= PLAIN_GATE * np.median(score[ok]))
+    g, d = PAIR_GRID, PLAIN_SPAN
+    ratios = []
+    for dv, du in ((0, d), (d, 0)):
+        a = (slice(0, h - dv, g), slice(0, w - du, g))
+        b = (slice(dv, h, g), slice(du, w, g))
+        pair = inside[a] & inside[b]
+        na, nb = normals[a][pair], normals[b][pair]
+        cos = np.clip(np.einsum("ij,ij->i", na, nb, dtype=np.float64), -1.0, 1.0)
+        scale = np.hypot(m[a][pair], m[b][pair]).astype(np.float64)
+        good = scale > 0.0
+        ratios.append(np.degrees(np.arccos(cos[good])) / scale[good])
+    r = np.concatenate(ratios)
+    r = r[np.isfinite(r)]
+    return max(1.0, float(np.median(r)) / RAYLEIGH_MEDIAN) if r.size >= MIN_PAIRS else 1.0
+
+
 def _plain(z, cam, normals, r: int):
     """A plain plane fit over a ``(2 r + 1)^2`` window (FALS, PCL's modes): the i.i.d. model
-    with the tile noise, the window's own residual."""
+    with the tile noise and the window's own residual, times the frame's measured excess
+    (:func:`_pair_excess`: correlated and quantised noise, which the i.i.d. form
+    under-predicts 2-6x), at most :data:`PLAIN_CAP` degrees where the i.i.d. map was below
+    it. Not on clean depth (noise below :data:`~depthnormals.ddm.auto.NOISE_CLEAN`): there the
+    pairs' angles are the scene's curvature (the factor read 37-355 on the clean synthetic
+    renders)."""
     fx, fy, cx, cy = cam
     p = noise_pass(z, fx, fy, tile=TILE)
     sigma = p.sigma if p.sigma == p.sigma else 0.0
     _, score = box_fit_windows(z, fx, fy, cx, cy, r, normals=False)
     tiles = _tile_maps(z, fx, fy, sigma, r, p.tiles(), 1e-6)
-    return _fit_error(z, normals, score, 0, tiles, (1.0, 0, 1.0, True, 0.0), None, cam)
+    m = _fit_error(z, normals, score, 0, tiles, (1.0, 0, 1.0, True, 0.0), None, cam)
+    if sigma < NOISE_CLEAN:  # clean depth: the pairs' angles are the scene's, not noise
+        return m
+    c = _pair_excess(normals, m, score)
+    return np.minimum(m * np.float32(c), np.maximum(m, np.float32(PLAIN_CAP))) if c > 1.0 else m
 
 
 def normals_with_uncertainty(compute, depth: Any, K: Any, *, method: str,
