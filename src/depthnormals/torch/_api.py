@@ -395,14 +395,11 @@ def _numba_backend(depth, K, method: str, depth_scale, invalid: str, options: di
     if method.endswith("+") and not uncertainty:  # (the map takes the default options only)
         for name, value in TORCH_MODULE_DEFAULTS.items():
             opts.setdefault(name, value)
-    if uncertainty:
-        pairs = [dn.estimate_normals(arr[i], Ks[i], method=method, depth_scale=depth_scale,
-                                     return_uncertainty=True, **opts) for i in range(b)]
-        out = np.stack([p[0] for p in pairs])
-        unc = torch.from_numpy(np.stack([p[1] for p in pairs]))[:, None]
-    else:
-        out = np.stack([dn.estimate_normals(arr[i], Ks[i], method=method, depth_scale=depth_scale, **opts)
-                        for i in range(b)])
+    # one stack call: the frames spread over the library's threads, each computed exactly as
+    # its single call (depthnormals.batch)
+    res = dn.estimate_normals(arr, Ks, method=method, depth_scale=depth_scale, stack=True,
+                              return_uncertainty=uncertainty, **opts)
+    out, unc = (res[0], torch.from_numpy(res[1])[:, None]) if uncertainty else (res, None)
     if invalid == "zero":
         out = np.where(np.isnan(out), np.float32(0.0), out)
     n = torch.from_numpy(out).permute(0, 3, 1, 2).to(out_dtype)
