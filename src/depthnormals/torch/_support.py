@@ -69,14 +69,20 @@ def _pairs(zf: torch.Tensor, h: int, w: int, r: int, cam) -> tuple[torch.Tensor,
         return zf.new_zeros((zf.shape[0], 0, 3)), torch.zeros((zf.shape[0], 0), dtype=torch.bool, device=dev)
     gv, gu = torch.meshgrid(vs, us, indexing="ij")
     c0 = torch.stack((gv.reshape(-1), gu.reshape(-1)), 1)
-    s0, n0 = _fit(zf, c0, r, every, w, cam)
+    n = c0.shape[0]
+    shifted = [c0 + torch.tensor([d * o, d * (1 - o)], device=dev) for o in range(2)]
+    insides = [(c1[:, 0] < h - r) & (c1[:, 1] < w - r) for c1 in shifted]
+    # the window, its neighbour to the right and the one below, in one call (a third of the
+    # kernel launches: eager on a GPU this step was launch-bound)
+    cs = torch.cat([c0] + [torch.where(i[:, None], c1, c0) for c1, i in zip(shifted, insides, strict=True)])
+    s_all, n_all = _fit(zf, cs, r, every, w, cam)
+    s0, n0 = s_all[:, :n], n_all[:, :n]
     zc = zf[:, c0[:, 0] * w + c0[:, 1]]
     first = ~torch.isnan(zc) & ~torch.isnan(s0)
     rows, oks = [], []
     for o in range(2):
-        c1 = c0 + torch.tensor([d * o, d * (1 - o)], device=dev)
-        inside = (c1[:, 0] < h - r) & (c1[:, 1] < w - r)
-        s1, n1 = _fit(zf, torch.where(inside[:, None], c1, c0), r, every, w, cam)
+        inside = insides[o]
+        s1, n1 = s_all[:, n * (o + 1):n * (o + 2)], n_all[:, n * (o + 1):n * (o + 2)]
         ok = first & inside & ~torch.isnan(s1)
         dot = torch.clamp((n0 * n1).sum(-1), -1.0, 1.0)
         ang = torch.rad2deg(torch.acos(torch.where(ok, dot, 1.0)))
