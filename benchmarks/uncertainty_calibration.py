@@ -240,7 +240,8 @@ def _figure(results: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    names = [k for k, v in results.items() if v["bins"] and not k.startswith(("synth-p", "synth-o"))]
+    names = [k for k, v in results.items()
+             if v["bins"] and not k.startswith(("synth-planes/", "synth-off/"))]
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 5))
     top = 0.0
     for k in names:
@@ -284,9 +285,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     cols = analytic_columns(a.method, a.noise, a.seed)
     if a.synth is not None:
-        cols = {k: c for k, c in sorted({**cols, **synth_columns(a.synth, a.method, a.planes,
-                                                                  a.seed)}.items(),
-                                        key=lambda kv: _order(kv[0]))}
+        cols.update(synth_columns(a.synth, a.method, a.planes, a.seed))
+        cols = dict(sorted(cols.items(), key=lambda kv: _order(kv[0])))
     if a.real and Path(a.real).exists():
         cols.update(real_columns(Path(a.real), a.method, a.seed))
     results = {k: c.summary() for k, c in cols.items()}

@@ -22,6 +22,19 @@ def _plane(noise: float, seed: int = 0, shape=(120, 160)):
     return r, r.depth * (1.0 + noise * rng.standard_normal(r.depth.shape) / fx)
 
 
+def _kinect_like_plane(seed, shape=(240, 320)):
+    """A tilted plane 2 m away seen as Kinect-like depth: disparity noise correlated over a
+    9x9 box, quantised to 1/8 px."""
+    r = tilted_plane((0.0, -0.6, -0.8), 2.0).render(shape=shape)
+    rng = np.random.default_rng(seed)
+    e = rng.standard_normal((shape[0] + 8, shape[1] + 8))
+    k = np.ones(9) / 3.0
+    e = np.apply_along_axis(lambda x: np.convolve(x, k, "valid"), 0, e)
+    e = np.apply_along_axis(lambda x: np.convolve(x, k, "valid"), 1, e)
+    disp = 580 * 0.075 / r.depth + 0.05 * e
+    return r, 580 * 0.075 / (np.round(disp * 8) / 8)
+
+
 @pytest.mark.parametrize("method", UNCERTAINTY_METHODS)
 def test_nan_pattern_matches_normals_with_holes(method):
     r, d = _plane(0.1)
@@ -194,20 +207,6 @@ def test_correlated_quantised_plane_mean_prediction(seed):
     assert 0.65 * obs <= pred <= 0.8 * obs, (pred, obs)
 
 
-
-def _kinect_like_plane(seed, shape=(240, 320)):
-    """A tilted plane 2 m away seen as Kinect-like depth: disparity noise correlated over a
-    9x9 box, quantised to 1/8 px."""
-    r = tilted_plane((0.0, -0.6, -0.8), 2.0).render(shape=shape)
-    rng = np.random.default_rng(seed)
-    e = rng.standard_normal((shape[0] + 8, shape[1] + 8))
-    k = np.ones(9) / 3.0
-    e = np.apply_along_axis(lambda x: np.convolve(x, k, "valid"), 0, e)
-    e = np.apply_along_axis(lambda x: np.convolve(x, k, "valid"), 1, e)
-    disp = 580 * 0.075 / r.depth + 0.05 * e
-    return r, 580 * 0.075 / (np.round(disp * 8) / 8)
-
-
 @pytest.mark.parametrize("method", ["fals", "pcl-covariance-matrix", "pcl-average-3d-gradient"])
 def test_plain_map_self_calibrates_on_correlated_quantised_depth(method, monkeypatch):
     """The plain fits' i.i.d. closed form reads 0.46x (FALS), 0.18x (PCL's covariance) and
@@ -241,7 +240,6 @@ def test_pair_excess_is_one_on_iid_noise_and_reads_a_scaled_map():
                                normals=False)
     assert U._pair_excess(n, u, score) < 1.1
     assert 2.6 < U._pair_excess(n, u / 3.0, score) < 3.4
-
 
 
 def test_plain_map_takes_no_excess_on_clean_depth(monkeypatch):
