@@ -18,12 +18,14 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
   that hold the pixel standing for the chosen one), inflated by ``sqrt(residual / sigma^2)``
   where the window's residual variance exceeds the noise (a chi-square test: a window across
   two surfaces is biased as well as noisy);
-- for the plain fits (FALS, PCL's modes) that map is then raised by the frame's own measured
-  excess (:func:`_pair_excess`): the median, over pairs of plane-interior pixels
-  :data:`PLAIN_SPAN` apart, of the angle between their normals over the angle the map
-  predicts for the pair; on correlated or quantised depth the i.i.d. form is 2-6x low, on
-  independent noise the factor stays 1 (at most :data:`PLAIN_CAP` degrees where it raises;
-  not on clean depth);
+- for the plain fits (FALS, PCL's modes) on noisy depth the map is instead the spread of
+  their own normals one window away (:func:`_far_spread`; the formula stays where no such
+  neighbour is valid), raised by the frame's own measured excess (:func:`_pair_excess`): the
+  median, over pairs of plane-interior pixels :data:`PLAIN_SPAN` apart, of the angle between
+  their normals over the angle the map predicts for the pair; on correlated or quantised
+  depth the i.i.d. form is 2-6x low and ranks the error poorly, on independent noise the
+  factor stays 1 (at most :data:`PLAIN_CAP` degrees where it raises; on clean depth the
+  formula alone);
 - on the box-fit branch the noise error ``e`` is first scaled by how far the fit error
   measured on the depth exceeds the i.i.d. prediction at the box radius (:func:`_excess_at`, at
   least 1: noise correlated over a pixel or so); the map is then a product of powers (in
@@ -1039,13 +1041,43 @@ def _pair_excess(normals, m, score) -> float:
     return max(1.0, float(np.median(r)) / RAYLEIGH_MEDIAN) if r.size >= MIN_PAIRS else 1.0
 
 
+def _far_spread(normals: np.ndarray, d: int) -> np.ndarray:
+    """The error a plain fit's normals show themselves: the mean angle (degrees) between a
+    pixel's normal and those ``d`` pixels to its left, right, above and below (the valid ones
+    inside the image), over ``sqrt 2``; NaN where there is none. With ``d`` one window
+    across (``2 r + 1``) the two windows share no pixel, so on noise alone the two errors are
+    independent and their angle has ``sqrt 2`` times the mean of one (isotropic errors); across
+    an edge or a wrong window the neighbours disagree and the spread rises with the error."""
+    n = normals.astype(np.float64)
+    h, w = n.shape[:2]
+    acc = np.zeros((h, w))
+    cnt = np.zeros((h, w))
+    for dv, du in ((0, d), (d, 0)):
+        if dv >= h or du >= w:
+            continue
+        a = n[: h - dv, : w - du]
+        b = n[dv:, du:]
+        ang = np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1),
+                                    np.einsum("...i,...i->...", a, b)))
+        ok = np.isfinite(ang)
+        ang = np.where(ok, ang, 0.0)
+        for part in ((slice(0, h - dv), slice(0, w - du)), (slice(dv, h), slice(du, w))):
+            acc[part] += ang  # the pair's angle counts for both of its pixels
+            cnt[part] += ok
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return (acc / cnt / math.sqrt(2.0)).astype(np.float32)
+
+
 def _plain(z, cam, normals, r: int):
-    """A plain plane fit over a ``(2 r + 1)^2`` window (FALS, PCL's modes): the i.i.d. model
-    with the tile noise and the window's own residual, times the frame's measured excess
-    (:func:`_pair_excess`: correlated and quantised noise, which the i.i.d. form
-    under-predicts 2-6x), at most :data:`PLAIN_CAP` degrees where the i.i.d. map was below
-    it. Not on clean depth (noise below :data:`~depthnormals.ddm.auto.NOISE_CLEAN`): there the
-    pairs' angles are the scene's curvature (the factor read 37-355 on the clean synthetic
+    """A plain plane fit over a ``(2 r + 1)^2`` window (FALS, PCL's modes): the normals' own
+    spread one window away (:func:`_far_spread`; the i.i.d. model with the tile noise and the
+    window's own residual where no neighbour that far is valid), times the frame's measured
+    excess (:func:`_pair_excess`: correlated and quantised noise, which the i.i.d. form
+    under-predicts 2-6x), at most :data:`PLAIN_CAP` degrees where the map was below it. On
+    real frames pooled the spread raised the Spearman rank correlation 0.60-0.68 -> 0.78-0.80
+    (docs/benchmarks.md section 17). On clean depth (noise below
+    :data:`~depthnormals.ddm.auto.NOISE_CLEAN`) the i.i.d. model alone: there the spreads and
+    the pairs' angles are the scene's curvature (the factor read 37-355 on the clean synthetic
     renders)."""
     fx, fy, cx, cy = cam
     p = noise_pass(z, fx, fy, tile=TILE)
@@ -1055,8 +1087,10 @@ def _plain(z, cam, normals, r: int):
     m = _fit_error(z, normals, score, 0, tiles, (1.0, 0, 1.0, True, 0.0), None, cam)
     if sigma < NOISE_CLEAN:  # clean depth: the pairs' angles are the scene's, not noise
         return m
-    c = _pair_excess(normals, m, score)
-    return np.minimum(m * np.float32(c), np.maximum(m, np.float32(PLAIN_CAP))) if c > 1.0 else m
+    s = _far_spread(normals, 2 * r + 1)
+    s = np.where(np.isfinite(s), s, m)  # no neighbour one window away: the closed form
+    c = _pair_excess(normals, s, score)
+    return np.minimum(s * np.float32(c), np.maximum(s, np.float32(PLAIN_CAP))) if c > 1.0 else s
 
 
 def normals_with_uncertainty(compute, depth: Any, K: Any, *, method: str,
