@@ -71,6 +71,7 @@ import numpy as np
 
 from .._parallel import run_rows
 from ..kernels.depth import prepare
+from ..metrics import angular_error
 from .auto import (
     BIG_RADIUS,
     GATE,
@@ -1048,17 +1049,13 @@ def _far_spread(normals: np.ndarray, d: int) -> np.ndarray:
     across (``2 r + 1``) the two windows share no pixel, so on noise alone the two errors are
     independent and their angle has ``sqrt 2`` times the mean of one (isotropic errors); across
     an edge or a wrong window the neighbours disagree and the spread rises with the error."""
-    n = normals.astype(np.float64)
-    h, w = n.shape[:2]
+    h, w = normals.shape[:2]
     acc = np.zeros((h, w))
     cnt = np.zeros((h, w))
     for dv, du in ((0, d), (d, 0)):
         if dv >= h or du >= w:
             continue
-        a = n[: h - dv, : w - du]
-        b = n[dv:, du:]
-        ang = np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1),
-                                    np.einsum("...i,...i->...", a, b)))
+        ang = angular_error(normals[: h - dv, : w - du], normals[dv:, du:])
         ok = np.isfinite(ang)
         ang = np.where(ok, ang, 0.0)
         for part in ((slice(0, h - dv), slice(0, w - du)), (slice(dv, h), slice(du, w))):
