@@ -186,7 +186,7 @@ def speed(method: str, synth: Path | None, real: str, repeats: int = 25) -> None
 
     dn.set_num_threads(1)
     frames = []
-    if real and Path(real).exists():
+    if real:
         frames += [(f"real/{f.group}", f.depth, f.K) for f in open_dataset(real)]
     seen: set = set()
     for f in read_synthetic(synth) if synth is not None else ():
@@ -280,6 +280,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--planes", action="store_true",
                     help="also score the synthetic columns on and off their plane reference")
     a = ap.parse_args(argv)
+    if a.real and not Path(a.real).is_dir():  # never a silently shorter table
+        ap.error(f"--real {a.real}: no such folder (pass --real '' to leave the real frames out)")
+    if a.synth is not None and not a.synth.is_dir():
+        ap.error(f"--synth {a.synth}: no such folder")
     if a.speed:
         speed(a.method, a.synth, a.real)
         return 0
@@ -287,7 +291,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.synth is not None:
         cols.update(synth_columns(a.synth, a.method, a.planes, a.seed))
         cols = dict(sorted(cols.items(), key=lambda kv: _order(kv[0])))
-    if a.real and Path(a.real).exists():
+    if a.real:
         cols.update(real_columns(Path(a.real), a.method, a.seed))
     results = {k: c.summary() for k, c in cols.items()}
     for k, s in results.items():

@@ -458,3 +458,17 @@ def test_calibration_bench_splits_synthetic_on_and_off_planes(tmp_path, load_ben
     assert [bench._order(k) < bench._order(j) for k, j in
             (("analytic", "synth/kinect_v1"), ("synth/kinect_v1", "synth-planes/kinect_v1"),
              ("synth-planes/kinect_v1", "synth-off/kinect_v1"))] == [True] * 3
+
+
+@pytest.mark.parametrize("argv", [["--real", "no-such-folder"],
+                                  ["--real", "", "--synth", "no-such-folder"]])
+def test_calibration_bench_refuses_a_missing_folder(tmp_path, monkeypatch, load_benchmark, capsys,
+                                                     argv):
+    """A mistyped ``--real`` or ``--synth`` is an error naming the folder, not a table with
+    those columns silently left out (the script exits before computing anything)."""
+    monkeypatch.chdir(tmp_path)
+    bench = load_benchmark("uncertainty_calibration")
+    with pytest.raises(SystemExit) as exc:
+        bench.main(argv)
+    assert exc.value.code == 2
+    assert "no-such-folder: no such folder" in capsys.readouterr().err
