@@ -193,8 +193,8 @@ def test_covariance_in_the_tangent_plane():
 @pytest.mark.parametrize("seed", [0, 1])
 def test_correlated_quantised_plane_mean_prediction(seed):
     """Kinect-like depth (disparity noise correlated over a 9x9 box, 1/8 px steps) on one
-    isolated plane: the measured-support map reads 0.72x / 0.71x the observed mean (0.46 /
-    0.64 and 0.48 / 0.67 deg, predicted / observed). It was within 25 % before the map became
+    isolated plane: the measured-support map reads 0.74x / 0.73x the observed mean (0.48 /
+    0.64 and 0.49 / 0.67 deg, predicted / observed). It was within 25 % before the map became
     a product of the spreads (docs/benchmarks.md 17): the fitted exponents give the frame's
     interior level 1/8, and on a plane alone the spreads are small; the floor
     ``LEVEL_FLOOR lev`` keeps it above half the level."""
@@ -320,11 +320,13 @@ def _mean_finite(angles):
     return np.where(c > 0, np.nansum(a, 0) / np.maximum(c, 1), 0.0)
 
 
-@pytest.mark.parametrize("split", [False, True])
-def test_spreads_match_numpy_in_any_bands(split):
-    """The spreads of both noisy maps (four neighbours; ``R`` to the right and below): the
-    kernels of the measured support (:func:`_spreads_rows`) and of the box-fit (fused into
-    :func:`_fit_error_rows`) equal a numpy reference, in one band of rows or two."""
+@pytest.mark.parametrize("kernel", ["box", "support", "support-bands"])
+def test_spreads_match_numpy_in_any_bands(kernel):
+    """The spreads of both noisy maps equal a numpy reference, in one band of rows or two:
+    the box-fit's (fused into :func:`_fit_error_rows`: the four neighbours, ``R`` to the right
+    and below) and the measured support's (:func:`_spreads_rows`: the four pixels
+    :data:`NEAR_SPAN` away and the four ``R`` away, right, left, below and above; a one-sided
+    ``R`` or a neighbour distance of 1 fails it)."""
     from depthnormals.ddm import uncertainty as U
 
     rng = np.random.default_rng(3)
@@ -332,11 +334,15 @@ def test_spreads_match_numpy_in_any_bands(split):
     n /= np.linalg.norm(n, axis=2, keepdims=True)
     n[rng.random((41, 53)) < 0.1] = np.nan
     big = 6
-    s1 = _mean_finite([_angle_ref(n, dv, du) for dv, du in ((-1, 0), (1, 0), (0, -1), (0, 1))])
-    sr = _mean_finite([_angle_ref(n, big, 0), _angle_ref(n, 0, big)])
+
+    def cross(d):
+        return _mean_finite([_angle_ref(n, dv, du) for dv, du in ((-d, 0), (d, 0), (0, -d), (0, d))])
+
     out = np.empty((2, 41, 53), dtype=np.float32)
-    bands = ((0, 17), (17, 41)) if split else ((0, 41),)
-    if split:  # the box-fit's kernel
+    bands = ((0, 17), (17, 41)) if kernel != "support" else ((0, 41),)
+    if kernel == "box":
+        s1 = cross(1)
+        sr = _mean_finite([_angle_ref(n, big, 0), _angle_ref(n, 0, big)])
         z = np.ones((41, 53), dtype=np.float32)
         tiles = (np.ones((1, 1)), np.ones((1, 1)), 64)
         for v0, v1 in bands:
@@ -346,9 +352,11 @@ def test_spreads_match_numpy_in_any_bands(split):
                               np.empty((41, 53), np.float32), out, big,
                               (np.empty((2, 1, 1), np.float32), 0, np.empty((1, 1), np.float32)))
     else:
+        assert U.NEAR_SPAN == 3
+        s1, sr = cross(U.NEAR_SPAN), cross(big)
         planar = np.ascontiguousarray(n.transpose(0, 2, 1))  # (H, 3, W)
         for v0, v1 in bands:
-            U._spreads_rows(v0, v1, planar, big, out)
+            U._spreads_rows(v0, v1, planar, U.NEAR_SPAN, big, out)
     ok = np.isfinite(n[..., 0])
     np.testing.assert_allclose(out[0][ok], s1[ok], atol=2e-4)
     np.testing.assert_allclose(out[1][ok], sr[ok], atol=2e-4)
