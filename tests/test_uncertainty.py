@@ -320,13 +320,14 @@ def _mean_finite(angles):
     return np.where(c > 0, np.nansum(a, 0) / np.maximum(c, 1), 0.0)
 
 
-@pytest.mark.parametrize("kernel", ["box", "support", "support-bands"])
+@pytest.mark.parametrize("kernel", ["fit-error", "box-fit", "support", "support-bands"])
 def test_spreads_match_numpy_in_any_bands(kernel):
-    """The spreads of both noisy maps equal a numpy reference, in one band of rows or two:
-    the box-fit's (fused into :func:`_fit_error_rows`: the four neighbours, ``R`` to the right
-    and below) and the measured support's (:func:`_spreads_rows`: the four pixels
-    :data:`NEAR_SPAN` away and the four ``R`` away, right, left, below and above; a one-sided
-    ``R`` or a neighbour distance of 1 fails it)."""
+    """The spreads of the noisy maps equal a numpy reference, in one band of rows or two: the
+    plane-fit error kernel's (:func:`_fit_error_rows` alone: the four neighbours, ``R`` to the
+    right and below), the box-fit map's (fused into it: the four pixels :data:`NEAR_SPAN`
+    away, ``R`` to the right and below) and the measured support's (:func:`_spreads_rows`: the
+    four pixels :data:`NEAR_SPAN` away and the four ``R`` away, right, left, below and above).
+    A one-sided spread or a neighbour distance of 1 where 3 is meant fails it."""
     from depthnormals.ddm import uncertainty as U
 
     rng = np.random.default_rng(3)
@@ -338,21 +339,23 @@ def test_spreads_match_numpy_in_any_bands(kernel):
     def cross(d):
         return _mean_finite([_angle_ref(n, dv, du) for dv, du in ((-d, 0), (d, 0), (0, -d), (0, d))])
 
+    assert U.NEAR_SPAN == 3
     out = np.empty((2, 41, 53), dtype=np.float32)
     bands = ((0, 17), (17, 41)) if kernel != "support" else ((0, 41),)
-    if kernel == "box":
-        s1 = cross(1)
+    if kernel in ("fit-error", "box-fit"):
+        s1 = cross(1 if kernel == "fit-error" else U.NEAR_SPAN)
         sr = _mean_finite([_angle_ref(n, big, 0), _angle_ref(n, 0, big)])
         z = np.ones((41, 53), dtype=np.float32)
         tiles = (np.ones((1, 1)), np.ones((1, 1)), 64)
+        box = ((np.zeros((2, 41, 53), np.float32), 0, np.empty((41, 53), np.float32), U.NEAR_SPAN)
+               if kernel == "box-fit" else
+               (np.empty((2, 1, 1), np.float32), 0, np.empty((1, 1), np.float32), 0))
         for v0, v1 in bands:
             U._fit_error_rows(v0, v1, z, n, np.ones((41, 53), np.float32), 0, tiles,
                               (1.0, 0, 1.0, False, 1.0), (np.full((1, 1), np.inf, np.float32),
                                                           0.0, 1.0), (40.0, 40.0, 26.0, 20.0),
-                              np.empty((41, 53), np.float32), out, big,
-                              (np.empty((2, 1, 1), np.float32), 0, np.empty((1, 1), np.float32)))
+                              np.empty((41, 53), np.float32), out, big, box)
     else:
-        assert U.NEAR_SPAN == 3
         s1, sr = cross(U.NEAR_SPAN), cross(big)
         planar = np.ascontiguousarray(n.transpose(0, 2, 1))  # (H, 3, W)
         for v0, v1 in bands:
