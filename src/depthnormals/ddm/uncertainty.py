@@ -139,13 +139,14 @@ PLAIN_CAP = 45.0
 RAYLEIGH_MEDIAN = math.sqrt(2.0 * math.log(2.0)) / math.sqrt(math.pi / 2.0)
 #: Both noisy maps are products of powers (exponents in eighths, :func:`_root8`) of their
 #: features (module doc): the noise level, the mean angles of the normals near the pixel
-#: (``s_1`` next to it, box-fit; ``s_N`` a few cells away, measured support) and ``R`` away
-#: (``s_R``, at least :data:`SPREAD_FLOOR` degrees), the density of
+#: (``s_N``, :data:`NEAR_SPAN` cells away; until session 13 the four neighbours' ``s_1``) and
+#: ``R`` away (``s_R``, at least :data:`SPREAD_FLOOR` degrees), the density of
 #: quantisation steps over the large window (plus :data:`STEP_OFFSET`), times ``1 + g jumps``
 #: (the density of depth jumps, a relative step over :data:`JUMP_REL`). Fitted on the training
-#: split of benchmarks/uncertainty_calibration.py (synthetic seed 0; real nyu_registered and
-#: tum_kinect1): a Poisson regression of the error on the logs of the features (its fit is
-#: the conditional mean, which the decile bins test), the exponents rounded to eighths, then
+#: split of benchmarks/uncertainty_calibration.py (synthetic seed 0, for the measured support
+#: since session 13 seeds 0 and 2; real nyu_registered and tum_kinect1): a Poisson
+#: regression of the error on the logs of the features (its fit is the conditional mean,
+#: which the decile bins test), the exponents rounded to eighths, then
 #: ``C``, ``g`` (and the box branch's high-error factor) by a coordinate search on the squared
 #: log ratios of the decile bins; checked on the rest (docs/benchmarks.md, section 17).
 SPREAD_FLOOR = 0.01
