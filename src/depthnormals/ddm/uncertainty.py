@@ -224,8 +224,10 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
     score: none); ``cam = (fx, fy, cx, cy)``. With ``sp_out`` (2, H, W) (not (1, 1, 1)) the
     mean angle (degrees) of the four neighbours goes to ``sp_out[0]`` instead of into the
     error, and that of the normals ``far_d`` to the right and below to ``sp_out[1]`` (the
-    ring of planar rows then ``far_d + 2`` deep). With ``box = (sub, sh, out_map)``,
-    ``out_map`` (H, W) (not (1, 1)), those two spreads stay apart likewise and the box-fit
+    ring of planar rows then ``far_d + 2`` deep). With ``box = (sub, sh, out_map, near_d)``,
+    ``out_map`` (H, W) (not (1, 1)), those two spreads stay apart likewise, the first taken
+    instead at ``near_d`` (> 0) pixels to the right, left, below and above (the ring then
+    ``near_d`` rows deeper behind), and the box-fit
     branch's map, but for its high-error factor, goes to ``out_map``
     (:func:`_box_product`, ``sub`` and ``sh`` as :func:`_half_row` reads them; the last factors
     follow in :func:`_box_final_rows`): one pass
