@@ -323,11 +323,12 @@ def _mean_finite(angles):
 @pytest.mark.parametrize("kernel", ["fit-error", "box-fit", "support", "support-bands"])
 def test_spreads_match_numpy_in_any_bands(kernel):
     """The spreads of the noisy maps equal a numpy reference, in one band of rows or two: the
-    plane-fit error kernel's (:func:`_fit_error_rows` alone: the four neighbours, ``R`` to the
-    right and below), the box-fit map's (fused into it: the four pixels :data:`NEAR_SPAN`
-    away, ``R`` to the right and below) and the measured support's (:func:`_spreads_rows`: the
-    four pixels :data:`NEAR_SPAN` away and the four ``R`` away, right, left, below and above).
-    A one-sided spread or a neighbour distance of 1 where 3 is meant fails it."""
+    plane-fit error kernel's (:func:`_fit_error_rows` with ``near_d`` 0: the four neighbours,
+    ``R`` to the right and below), the box-fit map's (``near_d`` :data:`NEAR_SPAN`: the four
+    pixels that far, ``R`` to the right and below) and the measured support's
+    (:func:`_spreads_rows`: the four pixels :data:`NEAR_SPAN` away and the four ``R`` away,
+    right, left, below and above). A one-sided spread or a neighbour distance of 1 where 3 is
+    meant fails it."""
     from depthnormals.ddm import uncertainty as U
 
     rng = np.random.default_rng(3)
@@ -352,7 +353,7 @@ def test_spreads_match_numpy_in_any_bands(kernel):
                (np.empty((2, 1, 1), np.float32), 0, np.empty((1, 1), np.float32), 0))
         for v0, v1 in bands:
             U._fit_error_rows(v0, v1, z, n, np.ones((41, 53), np.float32), 0, tiles,
-                              (1.0, 0, 1.0, False, 1.0), (np.full((1, 1), np.inf, np.float32),
+                              (1.0, 0, 1.0, False), (np.full((1, 1), np.inf, np.float32),
                                                           0.0, 1.0), (40.0, 40.0, 26.0, 20.0),
                               np.empty((41, 53), np.float32), out, big, box)
     else:

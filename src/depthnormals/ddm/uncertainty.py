@@ -214,26 +214,23 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
     that hold the pixel counts (``shift`` 0: the centred one), a pixel reading ``score[v //
     step, u // step]`` (``step`` 2 where ``H' < H``, else 1); ``tiles = (e0, var, tile)``: per
     ``tile x tile`` tile the error (radians per axis) and the residual variance that the noise
-    alone gives; ``depth = (zref, half, floor, tilt, spread)``: the variance grows as ``(z /
+    alone gives; ``depth = (zref, half, floor, tilt)``: the variance grows as ``(z /
     zref)^(half / 2)`` (``half`` an integer 0..4) and the error as its square root, the
     residual ratio is taken at least ``floor``, with ``tilt`` the error is projected as the
-    module doc says, and ``spread`` (> 0) weights the squared mean angle of the four
-    neighbours' normals to the pixel's, added to the squared error; ``big = (score, gate,
-    ratio)``: where the large window's residual (H, W) is
-    within ``gate`` times ``var`` the error is ``ratio e0`` and that residual counts (a (1, 1)
-    score: none); ``cam = (fx, fy, cx, cy)``. With ``sp_out`` (2, H, W) (not (1, 1, 1)) the
-    mean angle (degrees) of the four neighbours goes to ``sp_out[0]`` instead of into the
-    error, and that of the normals ``far_d`` to the right and below to ``sp_out[1]`` (the
-    ring of planar rows then ``far_d + 2`` deep). With ``box = (sub, sh, out_map, near_d)``,
-    ``out_map`` (H, W) (not (1, 1)), those two spreads stay apart likewise, the first taken
-    instead at ``near_d`` (> 0) pixels to the right, left, below and above (the ring then
-    ``near_d`` rows deeper behind), and the box-fit
-    branch's map, but for its high-error factor, goes to ``out_map``
-    (:func:`_box_product`, ``sub`` and ``sh`` as :func:`_half_row` reads them; the last factors
-    follow in :func:`_box_final_rows`): one pass
-    instead of writing the spreads and reading them back. Every loop runs along a row."""
+    module doc says; ``big = (score, gate, ratio)``: where the large window's residual (H, W)
+    is within ``gate`` times ``var`` the error is ``ratio e0`` and that residual counts (a
+    (1, 1) score: none); ``cam = (fx, fy, cx, cy)``; ``box = (sub, sh, out_map, near_d)``.
+    With ``out_map`` (H, W) (not (1, 1)) or ``sp_out`` (2, H, W) (not (1, 1, 1)) two spreads
+    are computed beside the error: the mean angle (degrees) of the normals ``max(1,
+    near_d)`` pixels to the right, left, below and above, and that of the normals ``far_d``
+    to the right and below (the ring of planar rows then ``far_d`` ahead and ``near_d``
+    behind). ``sp_out`` receives them (the test's window on them); ``out_map`` the box-fit
+    branch's map, but for its high-error factor (:func:`_box_product`, ``sub`` and ``sh`` as
+    :func:`_half_row` reads them; the last factors follow in :func:`_box_final_rows`): one
+    pass instead of writing the spreads and reading them back. Every loop runs along a
+    row."""
     e0t, vart, tile = tiles
-    zref, half, floor, tilt, spread = depth
+    zref, half, floor, tilt = depth
     big_s, big_gate, big_ratio = big
     fx, fy, cx, cy = cam
     h, w = z.shape
@@ -251,8 +248,8 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
     split = sp_out.shape[1] == h
     sub, sh, out_map, near_d = box
     boxed = out_map.shape[0] == h
-    near_d = near_d if boxed else 0  # > 0: the first spread at near_d in 4 directions
-    apart = split or boxed  # the spreads kept apart from the error
+    apart = split or boxed  # the spreads computed beside the error
+    near_d = max(1, near_d) if apart else 0  # the first spread, in four directions
     ahead = max(far_d if apart and far_d > 1 else 1, near_d)
     back = max(1, near_d)
     nr = ahead + back + 1
@@ -261,20 +258,14 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
     cnt = np.empty(w, dtype=f32)
     acf = np.empty(w, dtype=f32)
     cnf = np.empty(w, dtype=f32)
-    ra = np.zeros(w, dtype=f32)  # angles to the right neighbour, the one below, the one above
+    ra = np.zeros(w, dtype=f32)  # angles near_d to the right, and whether defined
     rk = np.zeros(w, dtype=f32)
-    da = np.zeros(w, dtype=f32)
-    dk = np.zeros(w, dtype=f32)
-    ua = np.zeros(w, dtype=f32)
-    uk = np.zeros(w, dtype=f32)
     s0r = np.zeros(w, dtype=f32)  # the row's two spreads, degrees
     s1r = np.zeros(w, dtype=f32)
     f2 = np.empty((2, w), dtype=f32)  # the row's densities (box)
     for a in range(max(0, v0 - back), min(h, v0 + ahead)):
         _planar_row(normals, a, ring[a % nr])
     rx = ((np.arange(w) - cx) / fx).astype(f32)
-    dg = f32(180.0 / math.pi)
-    sw = f32(0.0 if apart else spread)  # apart: the spread goes to sp_out / the map
     deg = f32(math.degrees(RAYLEIGH_MEAN))
     fl = f32(floor)
     one = f32(1.0)
@@ -314,7 +305,7 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
         t = cur[2]
         if apart and far_d > 0:
             _far_chords(x, y, t, ring[(v + far_d) % nr], v + far_d < h, far_d, acf, cnf)
-        if near_d > 0:  # the near spread, in four directions (:func:`_spreads_rows`)
+        if near_d > 0:  # the near spread, in four directions (as :func:`_spreads_rows`)
             acc[:] = 0.0
             cnt[:] = 0.0
             if near_d < w:
@@ -327,11 +318,6 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
                 if 0 <= o < h:
                     q = ring[o % nr]
                     _chord_into(x, y, t, q[0], q[1], q[2], acc, cnt)
-        elif spread > 0.0:  # each neighbour pair's angle once (:func:`_spreads_rows`)
-            if v == v0 and v0 > 0:
-                o = ring[(v0 - 1) % nr]
-                _angle_into(o[0], o[1], o[2], x, y, t, da, dk)
-            _four_angles(x, y, t, ring[(v + 1) % nr], v, h, (ra, rk, da, dk, ua, uk), acc, cnt)
         if half > 0:  # (z / zref)^(half / 2), without a transcendental function
             for u in range(w):
                 tz = np.float64(z[v, u]) * izref
@@ -367,10 +353,7 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
                 sy = sy if sy > f32(0.0) else f32(0.0)
                 e *= g  # one square root for the ratio and the tilt
                 ratio *= f32(0.5) * (sx + sy)
-            m = cnt[u] if spread > 0.0 else one
-            sp = dg * acc[u] / m if (spread > 0.0) & (m > f32(0.0)) else f32(0.0)
-            e = deg * e * np.sqrt(ratio)
-            out[v, u] = np.sqrt(e * e + sw * sp * sp) if ok else nan
+            out[v, u] = deg * e * np.sqrt(ratio) if ok else nan
         if apart:
             _mean_degrees(acc, cnt, s0r)
             _mean_degrees(acf, cnf, s1r)
@@ -667,38 +650,6 @@ def _angle_into(x, y, t, a, b, c, out_ang, out_ok):
         k = np.sqrt(c2 if c2 > f32(0.0) else f32(0.0))
         out_ang[i] = k + k * c2 * f32(1.0 / 24.0) if ok else f32(0.0)
         out_ok[i] = f32(1.0) if ok else f32(0.0)
-
-
-@nb.njit(cache=True, error_model="numpy", inline="always")
-def _four_angles(x, y, t, below, v, h, scratch, acc, cnt):
-    """Row ``v`` (normals ``x, y, t``) of the four-neighbour angles: ``acc`` their sum,
-    ``cnt`` how many are defined. ``scratch = (ra, rk, da, dk, ua, uk)``: ``da, dk`` hold on
-    entry the angles between rows ``v - 1`` and ``v`` (each pair once) and on return those
-    between ``v`` and ``v + 1`` (``below``, read where ``v + 1 < h``)."""
-    ra, rk, da, dk, ua, uk = scratch
-    w = x.size
-    if v > 0:
-        ua[:] = da
-        uk[:] = dk
-    else:
-        ua[:] = 0.0
-        uk[:] = 0.0
-    if v + 1 < h:
-        _angle_into(x, y, t, below[0], below[1], below[2], da, dk)
-    else:
-        da[:] = 0.0
-        dk[:] = 0.0
-    if w > 1:
-        _angle_into(x[:w - 1], y[:w - 1], t[:w - 1], x[1:], y[1:], t[1:], ra[:w - 1],
-                    rk[:w - 1])
-    ra[w - 1] = 0.0
-    rk[w - 1] = 0.0
-    for u in range(w):
-        acc[u] = ra[u] + da[u] + ua[u]
-        cnt[u] = rk[u] + dk[u] + uk[u]
-    for u in range(1, w):
-        acc[u] += ra[u - 1]
-        cnt[u] += rk[u - 1]
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -1002,7 +953,7 @@ def _box_branch(z, cam, sigma, levels, prof):
     bigs = (big_s, GATE, math.sqrt(_full_suu(r) / _full_suu(big))) if big > r else None
     unc = np.empty(z.shape, dtype=np.float32)
     box = (_densities(z, big, BOX_SUB), BOX_SUB, unc, NEAR_SPAN)
-    e0 = _fit_error(z, out, score, r, tiles, (1.0, 0, 1.0, True, 1.0), bigs, cam, big, box)
+    e0 = _fit_error(z, out, score, r, tiles, (1.0, 0, 1.0, True), bigs, cam, big, box)
     sub = e0[::MEDIAN_STEP, ::MEDIAN_STEP]
     sub = sub[np.isfinite(sub)]
     med = max(float(np.median(sub)) if sub.size else 1.0, 1e-6)
@@ -1136,7 +1087,7 @@ def _plain(z, cam, normals, r: int):
     sigma = p.sigma if p.sigma == p.sigma else 0.0
     _, score = box_fit_windows(z, fx, fy, cx, cy, r, normals=False)
     tiles = _tile_maps(z, fx, fy, sigma, r, p.tiles(), 1e-6)
-    m = _fit_error(z, normals, score, 0, tiles, (1.0, 0, 1.0, True, 0.0), None, cam)
+    m = _fit_error(z, normals, score, 0, tiles, (1.0, 0, 1.0, True), None, cam)
     if sigma < NOISE_CLEAN:  # clean depth: the pairs' angles are the scene's, not noise
         return m
     s = _far_spread(normals, 2 * r + 1)
