@@ -26,13 +26,19 @@ def _kinect_like_plane(seed, shape=(240, 320)):
     """A tilted plane 2 m away seen as Kinect-like depth: disparity noise correlated over a
     9x9 box, quantised to 1/8 px."""
     r = tilted_plane((0.0, -0.6, -0.8), 2.0).render(shape=shape)
+    return r, _kinect_like_depth(r.depth, seed)
+
+
+def _kinect_like_depth(z, seed):
+    """Clean depth ``z`` seen as by a Kinect v1: disparity noise correlated over a 9x9 box,
+    quantised to 1/8 px."""
     rng = np.random.default_rng(seed)
-    e = rng.standard_normal((shape[0] + 8, shape[1] + 8))
+    e = rng.standard_normal((z.shape[0] + 8, z.shape[1] + 8))
     k = np.ones(9) / 3.0
     e = np.apply_along_axis(lambda x: np.convolve(x, k, "valid"), 0, e)
     e = np.apply_along_axis(lambda x: np.convolve(x, k, "valid"), 1, e)
-    disp = 580 * 0.075 / r.depth + 0.05 * e
-    return r, 580 * 0.075 / (np.round(disp * 8) / 8)
+    disp = 580 * 0.075 / z + 0.05 * e
+    return 580 * 0.075 / (np.round(disp * 8) / 8)
 
 
 @pytest.mark.parametrize("method", UNCERTAINTY_METHODS)
@@ -192,22 +198,16 @@ def test_covariance_in_the_tangent_plane():
 
 def _kinect_like_corner(seed, shape=(240, 320)):
     """Two planes meeting at a horizontal 90 deg crease through the image centre (``Z + Y =
-    2`` above, ``Z - Y = 2`` below: mirror images), with the noise of :func:`_kinect_like_plane`;
-    depth, K and the exact normals."""
+    2`` above, ``Z - Y = 2`` below: mirror images), seen by :func:`_kinect_like_depth`; depth,
+    K and the exact normals."""
     h, w = shape
     K = np.array([[300.0, 0.0, (w - 1) / 2], [0.0, 300.0, (h - 1) / 2], [0.0, 0.0, 1.0]])
     y = (np.arange(h)[:, None] - K[1, 2]) / K[1, 1] + np.zeros((1, w))
     z = np.where(y < 0, 2.0 / (1 + y), 2.0 / (1 - y))
-    rng = np.random.default_rng(seed)
-    e = rng.standard_normal((h + 8, w + 8))
-    k = np.ones(9) / 3.0
-    e = np.apply_along_axis(lambda x: np.convolve(x, k, "valid"), 0, e)
-    e = np.apply_along_axis(lambda x: np.convolve(x, k, "valid"), 1, e)
-    disp = 580 * 0.075 / z + 0.05 * e
     g = np.zeros((h, w, 3), np.float32)
     g[y < 0] = (0.0, -math.sqrt(0.5), -math.sqrt(0.5))
     g[y > 0] = (0.0, math.sqrt(0.5), -math.sqrt(0.5))
-    return (580 * 0.075 / (np.round(disp * 8) / 8)).astype(np.float32), K, g
+    return _kinect_like_depth(z, seed).astype(np.float32), K, g
 
 
 def test_measured_support_map_is_symmetric_about_a_crease():

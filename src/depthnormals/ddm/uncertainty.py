@@ -306,18 +306,8 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
         if apart and far_d > 0:
             _far_chords(x, y, t, ring[(v + far_d) % nr], v + far_d < h, far_d, acf, cnf)
         if near_d > 0:  # the near spread, in four directions (as :func:`_spreads_rows`)
-            acc[:] = 0.0
-            cnt[:] = 0.0
-            if near_d < w:
-                hi = w - near_d
-                _angle_into(x[:hi], y[:hi], t[:hi], x[near_d:], y[near_d:], t[near_d:], ra[:hi],
-                            rk[:hi])
-                _add_into(ra[:hi], rk[:hi], acc[:hi], cnt[:hi])
-                _add_into(ra[:hi], rk[:hi], acc[near_d:], cnt[near_d:])
-            for o in (v + near_d, v - near_d):
-                if 0 <= o < h:
-                    q = ring[o % nr]
-                    _chord_into(x, y, t, q[0], q[1], q[2], acc, cnt)
+            _cross_chords(x, y, t, ring[(v + near_d) % nr], ring[(v - near_d) % nr],
+                          v + near_d < h, v >= near_d, near_d, ra, rk, acc, cnt)
         if half > 0:  # (z / zref)^(half / 2), without a transcendental function
             for u in range(w):
                 tz = np.float64(z[v, u]) * izref
@@ -668,15 +658,13 @@ def _far_chords(x, y, t, far, has_far, far_d, acc, cnt):
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _cross_chords(planar, v, d, ang, ok, acc, cnt):
+def _cross_chords(x, y, t, below, above, has_below, has_above, d, ang, ok, acc, cnt):
     """``acc``, ``cnt`` (reset here): the sum (radians) and count of the angles between the
-    normals of row ``v`` of ``planar`` (H, 3, W) and the finite ones ``d`` to the right, left,
-    below and above (``ang``, ``ok``: scratch rows). Each left-right pair's angle is computed
+    row's normals ``x, y, t`` and the finite ones ``d`` to the right and left, and of the rows
+    ``d`` below and above (``below``, ``above`` (3, W), read where ``has_below``,
+    ``has_above``); ``ang``, ``ok``: scratch rows. Each left-right pair's angle is computed
     once."""
-    h, w = planar.shape[0], planar.shape[2]
-    x = planar[v, 0]
-    y = planar[v, 1]
-    t = planar[v, 2]
+    w = x.size
     acc[:] = 0.0
     cnt[:] = 0.0
     if d < w:
@@ -684,9 +672,10 @@ def _cross_chords(planar, v, d, ang, ok, acc, cnt):
         _angle_into(x[:hi], y[:hi], t[:hi], x[d:], y[d:], t[d:], ang[:hi], ok[:hi])
         _add_into(ang[:hi], ok[:hi], acc[:hi], cnt[:hi])
         _add_into(ang[:hi], ok[:hi], acc[d:], cnt[d:])
-    for o in (v + d, v - d):
-        if 0 <= o < h:
-            _chord_into(x, y, t, planar[o, 0], planar[o, 1], planar[o, 2], acc, cnt)
+    if has_below:
+        _chord_into(x, y, t, below[0], below[1], below[2], acc, cnt)
+    if has_above:
+        _chord_into(x, y, t, above[0], above[1], above[2], acc, cnt)
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -705,18 +694,18 @@ def _spreads_rows(v0, v1, planar, near_d, far_d, out):
     that a row's three components are one C-contiguous block (a (3, W) slice of (3, H, W) is
     strided, and the loops reading it ran scalar, 5x slower). Every loop runs along a row
     over contiguous memory."""
-    w = planar.shape[2]
+    h, w = planar.shape[0], planar.shape[2]
     f32 = np.float32
     ang = np.zeros(w, dtype=f32)
     ok = np.zeros(w, dtype=f32)
     acc = np.empty(w, dtype=f32)
     cnt = np.empty(w, dtype=f32)
     for v in range(v0, v1):
-        _cross_chords(planar, v, near_d, ang, ok, acc, cnt)
-        _mean_degrees(acc, cnt, out[0, v])
-        if far_d > 0:
-            _cross_chords(planar, v, far_d, ang, ok, acc, cnt)
-            _mean_degrees(acc, cnt, out[1, v])
+        row = planar[v]
+        for k, d in enumerate((near_d, far_d)):
+            _cross_chords(row[0], row[1], row[2], planar[min(v + d, h - 1)],
+                          planar[max(v - d, 0)], v + d < h, v >= d, d, ang, ok, acc, cnt)
+            _mean_degrees(acc, cnt, out[k, v])
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
