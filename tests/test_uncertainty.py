@@ -408,6 +408,112 @@ def test_spreads_match_numpy_in_any_bands(kernel):
     np.testing.assert_allclose(out[1][ok], sr[ok], atol=2e-4)
 
 
+def _offsets_ref(z, n, d, cam):
+    """numpy reference of :func:`_offsets_rows`: per axis the least over the two sides of
+    ``|n . (Q - P)| / (z / fx) / d``, the larger axis, 0 where no side is valid."""
+    fx, fy, cx, cy = cam
+    h, w = z.shape
+    v, u = np.mgrid[0:h, 0:w]
+    x = np.stack([(u - cx) / fx * z, (v - cy) / fy * z, z], -1).astype(np.float64)
+
+    def side(dv, du):
+        q = np.full_like(x, np.nan)
+        ys, yd = slice(max(0, dv), h + min(0, dv)), slice(max(0, -dv), h + min(0, -dv))
+        xs, xd = slice(max(0, du), w + min(0, du)), slice(max(0, -du), w + min(0, -du))
+        q[yd, xd] = x[ys, xs]
+        return np.abs((n * (q - x)).sum(-1)) / (z / fx) / d
+
+    with np.errstate(invalid="ignore"):
+        hor = np.fmin(side(0, d), side(0, -d))
+        ver = np.fmin(side(d, 0), side(-d, 0))
+        return np.nan_to_num(np.fmax(hor, ver))
+
+
+def test_offsets_match_numpy_and_read_the_tilt():
+    """How far each pixel's plane misses its depth :data:`DEPTH_SPAN` cells away: equal to a
+    numpy reference with invalid depth and normals (one band of rows or two); on a
+    fronto-parallel plane whose normals are tilted by 30 deg about the y axis it reads
+    sin 30 deg = 0.5 (the slope across the tilt), with the true normals 0; beside a crease
+    (a fronto-parallel face, one receding 1:1) with the true normals 0 (one side of each axis
+    fits), and where the receding face's first pixels took the other face's normal, k / 3 at
+    k pixels past the crease (no side fits; the larger side would read 1 at every k)."""
+    from depthnormals.ddm import uncertainty as U
+
+    assert U.DEPTH_SPAN == 3
+    cam = (40.0, 40.0, 26.0, 20.0)
+    rng = np.random.default_rng(5)
+    z = (2.0 + 0.05 * rng.standard_normal((41, 53))).astype(np.float32)
+    z[rng.random(z.shape) < 0.1] = np.nan
+    n = rng.standard_normal((41, 53, 3)).astype(np.float32)
+    n /= np.linalg.norm(n, axis=2, keepdims=True)
+    n[rng.random((41, 53)) < 0.1] = np.nan
+    planar = np.ascontiguousarray(n.transpose(0, 2, 1))
+    want = _offsets_ref(z, n, U.DEPTH_SPAN, cam)
+    for bands in (((0, 41),), ((0, 17), (17, 41))):
+        out = np.full(z.shape, -1.0, np.float32)
+        for v0, v1 in bands:
+            U._offsets_rows(v0, v1, z, planar, U.DEPTH_SPAN, cam, out)
+        np.testing.assert_allclose(out, want, rtol=1e-4, atol=1e-5)
+
+    def offsets(z, n):
+        out = np.empty(z.shape, np.float32)
+        U._offsets_rows(0, z.shape[0], z, np.ascontiguousarray(n.transpose(0, 2, 1)),
+                        U.DEPTH_SPAN, cam, out)
+        return out
+
+    flat = np.full((41, 53), 2.0, np.float32)
+    t = math.radians(30.0)
+    tilted = np.broadcast_to(np.float32([math.sin(t), 0.0, -math.cos(t)]), (41, 53, 3))
+    np.testing.assert_allclose(offsets(flat, tilted), 0.5, atol=1e-5)
+    assert np.abs(offsets(flat, np.broadcast_to(np.float32([0, 0, -1]), (41, 53, 3)))).max() < 1e-6
+    u = np.arange(53, dtype=np.float32)
+    # a crease at column 26: left face fronto-parallel, right face receding 1:1
+    xr = (u - cam[2]) / cam[0]
+    zc = np.where(u <= 26, 2.0, 2.0 / (1.0 - xr + xr[26])).astype(np.float32)
+    zz = np.broadcast_to(zc, (41, 53)).copy()
+    nl = np.float32([0.0, 0.0, -1.0])
+    nr = np.float32([1.0, 0.0, -1.0]) / np.float32(math.sqrt(2.0))
+    true = np.where((u <= 26)[None, :, None], nl, nr).astype(np.float32) * np.ones((41, 1, 1), np.float32)
+    o = offsets(zz, true)
+    assert o[5:-5, 20:33].max() < 1e-3  # beside the crease, one side of each axis fits
+    wrong = true.copy()
+    wrong[:, 27:30] = nl  # three pixels of the receding face took the other face's normal
+    o = offsets(zz, wrong)
+    for k in (1, 2, 3):  # k pixels into it: no side fits, the nearer misses by k of 3 cells
+        np.testing.assert_allclose(o[5:-5, 26 + k], k / 3.0, rtol=0.05)
+
+
+def test_support_map_adds_the_depth_ramp():
+    """The measured support's map, last: plus ``A m^(1/4)`` times the ramp of the offsets
+    (:data:`DEPTH_RAMP`): nothing up to ``o0``, half at the middle, all from ``o1``; NaN where
+    the normal is NaN."""
+    from depthnormals.ddm import uncertainty as U
+
+    a, o0, o1 = U.DEPTH_RAMP
+    assert (a, o0, o1) == (3.0, 0.8, 1.5)
+    w = 6
+    z = np.full((1, w), 2.0, np.float32)
+    n = np.zeros((1, w, 3), np.float32)
+    n[..., 2] = -1.0
+    n[0, 5] = np.nan
+    s1 = np.full((1, w), 2.0, np.float32)
+    far = np.full((1, 1, w), 3.0, np.float32)
+    sub = np.zeros((2, 1, w), np.float32)
+
+    def run(offs):
+        out = np.empty((1, w), np.float32)
+        U._support_rows(0, 1, z, n, (1.0, 2.0, 0), (s1, far, sub, 0, offs), out)
+        return out[0]
+
+    m = run(np.zeros((1, w), np.float32))
+    assert np.all(m[:5] > 0.0) and np.isnan(m[5])
+    offs = np.float32([[0.0, o0, (o0 + o1) / 2, o1, 5.0, 5.0]])
+    got = run(offs)
+    want = m + a * m ** 0.25 * np.float32([0.0, 0.0, 0.5, 1.0, 1.0, 1.0])
+    np.testing.assert_allclose(got[:5], want[:5], rtol=1e-5)
+    assert np.isnan(got[5])
+
+
 def test_edge_integrals_match_numpy():
     """Depth jumps (over 3 % of the nearer depth, or invalid) and quantisation steps per
     pixel, summed into integral images, and their window means."""
