@@ -56,12 +56,16 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
   took its neighbour face's normal agrees with its next neighbours, and one ``R`` to the
   right and below sees the crease only where it lies that way; on kinect_v1 the pixels with
   a 10 deg crease in the output 4-8 px away read 4.5-7.7x their former map;
+  last, a ramp of how far the pixel's own plane misses its depth :data:`DEPTH_SPAN` cells
+  away (:func:`_offsets_rows`, :data:`DEPTH_RAMP`, session 14): a face narrower than the
+  windows (a kerb's riser, a pole) takes the normal of the face beside it, coherently, so
+  no spread sees it, but its depth does;
 - **clean depth** (the plane hypotheses): the float rounding of the one-pixel stencils
   (``sigma / sqrt(6)``) plus, where the pixel's normal agrees with none of its four neighbours'
   (a facet narrower than two pixels: no one-sided stencil fits), the least angle between them.
 
 Vectorised passes per image (:func:`_fit_error_rows`, :func:`_spreads_rows`,
-:func:`_edge_integrals`, :func:`_support_rows`, :func:`_spread_rows`) over
+:func:`_offsets_rows`, :func:`_edge_integrals`, :func:`_support_rows`, :func:`_spread_rows`) over
 quantities the branches already computed; the densities are read on every second row and
 column of the map's grid. Conversions to the von
 Mises-Fisher concentration of Bae et al. (ICCV 2021): :func:`uncertainty_to_kappa`,
