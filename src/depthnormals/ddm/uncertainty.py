@@ -776,12 +776,12 @@ def _offsets_rows(v0, v1, z, planar, d, cam, out):
     inv = np.empty(w, dtype=f32)
     bh = np.empty(w, dtype=f32)
     bv = np.empty(w, dtype=f32)
+    fd = f32(fx / d)
     for v in range(v0, v1):
         row = planar[v]
         x, y, t = row[0], row[1], row[2]
         _row_points(z, v, rx, f32((v - cy) / fy), p)
         zr = z[v]
-        fd = f32(fx / d)
         for u in range(w):
             inv[u] = fd / zr[u]
         bh[:] = inf
