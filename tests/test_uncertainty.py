@@ -343,15 +343,21 @@ def test_plain_map_takes_no_excess_on_clean_depth(monkeypatch):
     assert (un > u1).mean() > 0.9
 
 
+def _neighbour(a, dv, du):
+    """``a`` (H, W, ...) read ``(dv, du)`` away: ``out[v, u] = a[v + dv, u + du]``, NaN
+    outside."""
+    h, w = a.shape[:2]
+    o = np.full_like(a, np.nan)
+    ys, yd = slice(max(0, dv), h + min(0, dv)), slice(max(0, -dv), h + min(0, -dv))
+    xs, xd = slice(max(0, du), w + min(0, du)), slice(max(0, -du), w + min(0, -du))
+    o[yd, xd] = a[ys, xs]
+    return o
+
+
 def _angle_ref(n, dv, du):
     """The chord angle (degrees, as the kernels) of ``n`` to its neighbour ``(dv, du)`` away,
     NaN outside or where either is NaN."""
-    h, w = n.shape[:2]
-    o = np.full_like(n, np.nan)
-    ys, yd = slice(max(0, dv), h + min(0, dv)), slice(max(0, -dv), h + min(0, -dv))
-    xs, xd = slice(max(0, du), w + min(0, du)), slice(max(0, -du), w + min(0, -du))
-    o[yd, xd] = n[ys, xs]
-    c2 = 2.0 - 2.0 * (n * o).sum(-1)
+    c2 = 2.0 - 2.0 * (n * _neighbour(n, dv, du)).sum(-1)
     k = np.sqrt(np.maximum(c2, 0.0))
     return np.degrees(k + k * c2 / 24.0)
 
@@ -417,11 +423,7 @@ def _offsets_ref(z, n, d, cam):
     x = np.stack([(u - cx) / fx * z, (v - cy) / fy * z, z], -1).astype(np.float64)
 
     def side(dv, du):
-        q = np.full_like(x, np.nan)
-        ys, yd = slice(max(0, dv), h + min(0, dv)), slice(max(0, -dv), h + min(0, -dv))
-        xs, xd = slice(max(0, du), w + min(0, du)), slice(max(0, -du), w + min(0, -du))
-        q[yd, xd] = x[ys, xs]
-        return np.abs((n * (q - x)).sum(-1)) / (z / fx) / d
+        return np.abs((n * (_neighbour(x, dv, du) - x)).sum(-1)) / (z / fx) / d
 
     with np.errstate(invalid="ignore"):
         hor = np.fmin(side(0, d), side(0, -d))
