@@ -235,18 +235,24 @@ def test_measured_support_map_is_symmetric_about_a_crease():
 @pytest.mark.parametrize("seed", [0, 1])
 def test_correlated_quantised_plane_mean_prediction(seed):
     """Kinect-like depth (disparity noise correlated over a 9x9 box, 1/8 px steps) on one
-    isolated plane: the measured-support map reads 0.74x / 0.73x the observed mean (0.48 /
-    0.64 and 0.49 / 0.67 deg, predicted / observed). It was within 25 % before the map became
-    a product of the spreads (docs/benchmarks.md 17): the fitted exponents give the frame's
-    interior level 1/8, and on a plane alone the spreads are small; the floor
-    ``LEVEL_FLOOR lev`` keeps it above half the level."""
+    isolated plane: the measured-support map reads 0.81x / 0.79x the observed mean (0.52 /
+    0.64 and 0.53 / 0.67 deg, predicted / observed; 0.74x / 0.73x before session 15's depth
+    ramp, which adds where the depth straddles the pixel's plane). It was within 25 % before
+    the map became a product of the spreads (docs/benchmarks.md 17): the fitted exponents give
+    the frame's interior level 1/8, and on a plane alone the spreads are small; the floor
+    ``LEVEL_FLOOR lev`` keeps it above half the level. The top decile of the prediction holds
+    its observed mean within 25 % (1.07 / 0.98 and 1.15 / 1.20 deg; session 14's ramp of the
+    lesser side's magnitude read 0.76 / 1.08, and the same form against the frame's tail 1.91
+    / 0.74: a pixel's own noise leaves its plane the same way on both sides)."""
     r, d = _kinect_like_plane(seed)
     assert dn.noise_profile(d, r.K).branch == "measured-support"
     n, u = dn.estimate_normals(d, r.K, return_uncertainty=True)
     err = dn.angular_error(n, r.normals)
     ok = np.isfinite(err)
     pred, obs = float(np.mean(u[ok])), float(np.mean(err[ok]))
-    assert 0.65 * obs <= pred <= 0.8 * obs, (pred, obs)
+    assert 0.7 * obs <= pred <= 0.9 * obs, (pred, obs)
+    top = ok & (u >= np.quantile(u[ok], 0.9))
+    assert 0.75 <= np.mean(err[top]) / np.mean(u[top]) <= 1.25, (np.mean(u[top]), np.mean(err[top]))
 
 
 @pytest.mark.parametrize("method", ["fals", "pcl-covariance-matrix", "pcl-average-3d-gradient"])
@@ -415,33 +421,39 @@ def test_spreads_match_numpy_in_any_bands(kernel):
 
 
 def _offsets_ref(z, n, d, cam):
-    """numpy reference of :func:`_offsets_rows`: per axis the least over the two sides of
-    ``|n . (Q - P)| / (z / fx) / d``, the larger axis, 0 where no side is valid."""
+    """numpy reference of :func:`_offsets_rows`: per axis, where ``n . (Q - P) / (z / fx) / d``
+    has opposite signs on the two sides, the lesser magnitude, else 0 (also where a side is
+    invalid); the larger axis."""
     fx, fy, cx, cy = cam
     h, w = z.shape
     v, u = np.mgrid[0:h, 0:w]
     x = np.stack([(u - cx) / fx * z, (v - cy) / fy * z, z], -1).astype(np.float64)
 
     def side(dv, du):
-        return np.abs((n * (_neighbour(x, dv, du) - x)).sum(-1)) / (z / fx) / d
+        return (n * (_neighbour(x, dv, du) - x)).sum(-1) / (z / fx) / d
+
+    def axis(a, b):
+        return np.where(a * b < 0, np.fmin(np.abs(a), np.abs(b)), 0.0)
 
     with np.errstate(invalid="ignore"):
-        hor = np.fmin(side(0, d), side(0, -d))
-        ver = np.fmin(side(d, 0), side(-d, 0))
-        return np.nan_to_num(np.fmax(hor, ver))
+        return np.fmax(axis(side(0, d), side(0, -d)), axis(side(d, 0), side(-d, 0)))
 
 
-def test_offsets_match_numpy_and_read_the_tilt():
-    """How far each pixel's plane misses its depth :data:`DEPTH_SPAN` cells away: equal to a
-    numpy reference with invalid depth and normals (one band of rows or two); on a
-    fronto-parallel plane whose normals are tilted by 30 deg about the y axis it reads
-    sin 30 deg = 0.5 (the slope across the tilt), with the true normals 0; beside a crease
-    (a fronto-parallel face, one receding 1:1) with the true normals 0 (one side of each axis
-    fits), and where the receding face's first pixels took the other face's normal, k / 3 at
-    k pixels past the crease (no side fits; the larger side would read 1 at every k)."""
+@pytest.mark.parametrize("span", [3, 6])
+def test_offsets_match_numpy_and_read_the_tilt(span):
+    """How far each pixel's plane misses its depth ``d`` cells away (each of
+    :data:`DEPTH_SPANS`): equal to a numpy reference with invalid depth and normals (one band
+    of rows or two). With ``d = 3``: on a fronto-parallel plane whose normals are tilted by 30
+    deg about the y axis it reads sin 30 deg = 0.5 (the slope across the tilt), with the true
+    normals 0; beside a crease (a fronto-parallel face, one receding 1:1) with the true normals
+    0 (one side of each axis fits), and where the receding face's first pixels took the other
+    face's normal, k / 3 at k pixels past the crease (the depth rises on one side and falls on
+    the other; the larger side would read 1 at every k); a pixel whose own depth is off its
+    plane, and a pixel beside a one-sided step, read 0 (both sides leave the plane the same
+    way, or one side fits: the lesser magnitude alone would read the spike's height)."""
     from depthnormals.ddm import uncertainty as U
 
-    assert U.DEPTH_SPAN == 3
+    assert U.DEPTH_SPANS == (3, 6)
     cam = (40.0, 40.0, 26.0, 20.0)
     rng = np.random.default_rng(5)
     z = (2.0 + 0.05 * rng.standard_normal((41, 53))).astype(np.float32)
@@ -450,23 +462,29 @@ def test_offsets_match_numpy_and_read_the_tilt():
     n /= np.linalg.norm(n, axis=2, keepdims=True)
     n[rng.random((41, 53)) < 0.1] = np.nan
     planar = np.ascontiguousarray(n.transpose(0, 2, 1))
-    want = _offsets_ref(z, n, U.DEPTH_SPAN, cam)
+    want = _offsets_ref(z, n, span, cam)
+    assert np.count_nonzero(want) > 100
     for bands in (((0, 41),), ((0, 17), (17, 41))):
-        out = np.full(z.shape, -1.0, np.float32)
+        out = np.full((2, *z.shape), -1.0, np.float32)
         for v0, v1 in bands:
-            U._offsets_rows(v0, v1, z, planar, U.DEPTH_SPAN, cam, out)
-        np.testing.assert_allclose(out, want, rtol=1e-4, atol=1e-5)
+            U._offsets_rows(v0, v1, z, planar, (span, 3), cam, out)
+        np.testing.assert_allclose(out[0], want, rtol=1e-4, atol=1e-5)
+        np.testing.assert_allclose(out[1], _offsets_ref(z, n, 3, cam), rtol=1e-4, atol=1e-5)
+    if span != 3:
+        return
 
     def offsets(z, n):
-        out = np.empty(z.shape, np.float32)
+        out = np.empty((1, *z.shape), np.float32)
         U._offsets_rows(0, z.shape[0], z, np.ascontiguousarray(n.transpose(0, 2, 1)),
-                        U.DEPTH_SPAN, cam, out)
-        return out
+                        (3,), cam, out)
+        return out[0]
 
     flat = np.full((41, 53), 2.0, np.float32)
     t = math.radians(30.0)
     tilted = np.broadcast_to(np.float32([math.sin(t), 0.0, -math.cos(t)]), (41, 53, 3))
-    np.testing.assert_allclose(offsets(flat, tilted), 0.5, atol=1e-5)
+    o = offsets(flat, tilted)
+    np.testing.assert_allclose(o[:, 3:-3], 0.5, atol=1e-5)
+    assert np.all(o[:, :3] == 0.0) and np.all(o[:, -3:] == 0.0)  # one side only: no reading
     assert np.abs(offsets(flat, np.broadcast_to(np.float32([0, 0, -1]), (41, 53, 3)))).max() < 1e-6
     u = np.arange(53, dtype=np.float32)
     # a crease at column 26: left face fronto-parallel, right face receding 1:1
@@ -483,37 +501,88 @@ def test_offsets_match_numpy_and_read_the_tilt():
     o = offsets(zz, wrong)
     for k in (1, 2, 3):  # k pixels into it: no side fits, the nearer misses by k of 3 cells
         np.testing.assert_allclose(o[5:-5, 26 + k], k / 3.0, rtol=0.05)
+    front = np.broadcast_to(nl, (41, 53, 3))
+    spike = flat.copy()
+    spike[20, 30] = 2.1  # the pixel's own depth 0.1 m behind its plane: 1 footprint per cell
+    o = offsets(spike, front)
+    assert o[20, 30] == 0.0
+    assert np.abs(_offsets_ref(spike, front, 3, cam)[20, 30]) == 0.0
+    step = flat.copy()
+    step[:, 30:] = 2.05  # a step: the pixels beside it see it on one side only
+    assert offsets(step, front)[5:-5].max() < 1e-6
 
 
 def test_support_map_adds_the_depth_ramp():
-    """The measured support's map, last: plus ``A m^(1/4)`` times the ramp of the offsets
-    (:data:`DEPTH_RAMP`): nothing up to ``o0``, half at the middle, all from ``o1``; NaN where
-    the normal is NaN."""
+    """The measured support's map, last: plus ``A t^2 min(m / DEPTH_FULL, 1)`` with ``t`` the
+    ramp of the offsets over their frame scales (:data:`DEPTH_RAMP`), the lesser of the two
+    spans, over ``sqrt(growth)``: nothing up to ``r0``, a quarter at the middle, all from
+    ``r1``; the scale and the growth divide; NaN where the normal is NaN."""
     from depthnormals.ddm import uncertainty as U
 
-    a, o0, o1 = U.DEPTH_RAMP
-    assert (a, o0, o1) == (3.0, 0.8, 1.5)
-    w = 6
+    a, r0, r1 = U.DEPTH_RAMP
+    assert (a, r0, r1, U.DEPTH_FULL) == (55.0, 0.7, 2.5, 0.5)
+    w = 8
     z = np.full((1, w), 2.0, np.float32)
     n = np.zeros((1, w, 3), np.float32)
     n[..., 2] = -1.0
-    n[0, 5] = np.nan
-    s1 = np.full((1, w), 2.0, np.float32)
-    far = np.full((1, 1, w), 3.0, np.float32)
+    n[0, 7] = np.nan
     sub = np.zeros((2, 1, w), np.float32)
 
-    def run(offs):
+    def run(o3, o6, inv_q=(1.0, 1.0), model=(1.0, 2.0, 0), spreads=(2.0, 3.0)):
         out = np.empty((1, w), np.float32)
-        U._support_rows(0, 1, z, n, (1.0, 2.0, 0), (s1, far, sub, 0, offs), out)
+        offs = np.stack([np.float32([o3]), np.float32([o6])])
+        s1 = np.full((1, w), spreads[0], np.float32)
+        far = np.full((1, 1, w), spreads[1], np.float32)
+        U._support_rows(0, 1, z, n, model, (s1, far, sub, 0, offs, inv_q), out)
         return out[0]
 
-    m = run(np.zeros((1, w), np.float32))
-    assert np.all(m[:5] > 0.0) and np.isnan(m[5])
-    offs = np.float32([[0.0, o0, (o0 + o1) / 2, o1, 5.0, 5.0]])
-    got = run(offs)
-    want = m + a * m ** 0.25 * np.float32([0.0, 0.0, 0.5, 1.0, 1.0, 1.0])
-    np.testing.assert_allclose(got[:5], want[:5], rtol=1e-5)
-    assert np.isnan(got[5])
+    m = run([0.0] * w, [0.0] * w)
+    assert np.all(m[:7] > U.DEPTH_FULL) and np.isnan(m[7])
+    mid = (r0 + r1) / 2
+    got = run([0.0, r0, mid, r1, 5.0, 5.0, 5.0, 5.0], [0.0, r0, mid, r1, 5.0, r0, 5.0, 5.0])
+    want = m + a * np.float32([0.0, 0.0, 0.25, 1.0, 1.0, 0.0, 1.0, 1.0])
+    np.testing.assert_allclose(got[:7], want[:7], rtol=1e-5)
+    assert np.isnan(got[7])
+    # the frame's scale: at inverse scale 1/2 offsets of 2 r1 read r1 (all), of 2 r0 nothing
+    got = run([2 * r1, 2 * r0] + [0.0] * 6, [2 * r1, 2 * r0] + [0.0] * 6, inv_q=(0.5, 0.5))
+    np.testing.assert_allclose(got[:2], m[:2] + a * np.float32([1.0, 0.0]), rtol=1e-5)
+    # the growth: at twice zref with half = 4 (sqrt(growth) = 2) an offset of 2 r1 reads r1
+    zg = run([2 * r1] * w, [2 * r1] * w, model=(1.0, 1.0, 4))
+    mg = run([0.0] * w, [0.0] * w, model=(1.0, 1.0, 4))
+    np.testing.assert_allclose(zg[:7], mg[:7] + a, rtol=1e-5)
+    # a map under DEPTH_FULL gains in proportion
+    lo = run([r1] * w, [r1] * w, model=(0.2, 2.0, 0), spreads=(0.1, 0.1))
+    m_lo = run([0.0] * w, [0.0] * w, model=(0.2, 2.0, 0), spreads=(0.1, 0.1))
+    assert np.all(m_lo[:7] < U.DEPTH_FULL)
+    np.testing.assert_allclose(lo[:7], m_lo[:7] + a * m_lo[:7] / U.DEPTH_FULL, rtol=1e-5)
+
+
+def test_offset_scales_read_the_percentile_over_the_growth():
+    """The frame scale of each span's offsets: the :data:`DEPTH_QUANTILE` th percentile of
+    ``o / sqrt(growth)`` on every :data:`MEDIAN_STEP`-th row and column, where the normal is
+    valid and the offset positive; 0 with none."""
+    from depthnormals.ddm import uncertainty as U
+
+    rng = np.random.default_rng(2)
+    h, w = 60, 70
+    z = np.full((h, w), 4.0, np.float32)
+    z[: h // 2] = 1.0
+    n = np.zeros((h, w, 3), np.float32)
+    n[..., 2] = -1.0
+    n[::3, ::5] = np.nan
+    offs = rng.random((2, h, w)).astype(np.float32)
+    offs[1] *= 3.0
+    offs[:, ::4] = 0.0
+    got = U._offset_scales(z, n, offs, 1.0, 4)  # sqrt(growth) = z / zref
+    st = U.MEDIAN_STEP
+    for i in range(2):
+        s = (offs[i] / z)[::st, ::st]
+        s = s[np.isfinite(n[::st, ::st, 0]) & (s > 0)]
+        assert got[i] == pytest.approx(np.percentile(s, U.DEPTH_QUANTILE), rel=1e-5)
+    assert got[1] > 2.0 * got[0]
+    flat = U._offset_scales(z, n, offs, 1.0, 0)  # no growth
+    assert flat[0] > got[0]
+    assert np.all(U._offset_scales(z, n, np.zeros_like(offs), 1.0, 4) == 0.0)
 
 
 def test_edge_integrals_match_numpy():
@@ -634,3 +703,22 @@ def test_calibration_bench_refuses_a_missing_folder(tmp_path, monkeypatch, load_
         bench.main(argv)
     assert exc.value.code == 2
     assert "no-such-folder: no such folder" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("w", [8, 9])
+def test_upsample_reads_the_cell_and_keeps_invalid_depth(w):
+    """The half grid's map upsampled: each pixel its 2x2 cell's value, NaN exactly where the
+    depth is invalid (odd widths and heights included), for bands of rows."""
+    from depthnormals.ddm import uncertainty as U
+
+    rng = np.random.default_rng(3)
+    h = 7
+    coarse = rng.random(((h + 1) // 2, (w + 1) // 2)).astype(np.float32)
+    z = np.full((h, w), 2.0, np.float32)
+    z[rng.random((h, w)) < 0.2] = np.nan
+    out = np.full((h, w), -1.0, np.float32)
+    for v0, v1 in ((0, 3), (3, h)):
+        U._upsample_rows(v0, v1, coarse, z, out)
+    want = np.repeat(np.repeat(coarse, 2, 0), 2, 1)[:h, :w]
+    want[np.isnan(z)] = np.nan
+    np.testing.assert_array_equal(out, want)

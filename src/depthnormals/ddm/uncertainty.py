@@ -51,15 +51,16 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
   most of the weight: on the frames of the calibration benchmark the neighbours' spread
   alone ranked the error better than the former map on every measured-support column, and
   the Poisson fit of the exponents (module constants) gave the level 1/8 of them (on an
-  isolated plane the map then reads 0.74x the observed mean, tests/test_uncertainty.py).
+  isolated plane the map then reads 0.8x the observed mean, tests/test_uncertainty.py).
   Isotropic spreads a few cells away (session 13): a pixel a few pixels from a crease that
   took its neighbour face's normal agrees with its next neighbours, and one ``R`` to the
   right and below sees the crease only where it lies that way; on kinect_v1 the pixels with
   a 10 deg crease in the output 4-8 px away read 4.5-7.7x their former map;
-  last, a ramp of how far the pixel's own plane misses its depth :data:`DEPTH_SPAN` cells
-  away (:func:`_offsets_rows`, :data:`DEPTH_RAMP`, session 14): a face narrower than the
-  windows (a kerb's riser, a pole) takes the normal of the face beside it, coherently, so
-  no spread sees it, but its depth does;
+  last, a ramp of how far the pixel's own plane misses its depth :data:`DEPTH_SPANS` cells
+  away, on both sides and in opposite directions, against the frame's own tail of that
+  reading (:func:`_offsets_rows`, :func:`_offset_scales`, :data:`DEPTH_RAMP`, sessions
+  14-15): a face narrower than the windows (a kerb's riser, a pole) takes the normal of the
+  face beside it, coherently, so no spread sees it, but its depth does;
 - **clean depth** (the plane hypotheses): the float rounding of the one-pixel stencils
   (``sigma / sqrt(6)``) plus, where the pixel's normal agrees with none of its four neighbours'
   (a facet narrower than two pixels: no one-sided stencil fits), the least angle between them.
@@ -165,16 +166,28 @@ STEP_OFFSET = 0.3
 #: rounded; held out: seeds 1 and 3 (48 frames) and four real folders (docs/benchmarks.md 17).
 SUPPORT_MAP = (0.8457, 0.25)
 SUPPORT_POW = (1, 4, 3, 3)
-#: Measured support, last: the map ``m`` plus ``A m^(1/4) clip((o - o0) / (o1 - o0), 0, 1)``,
-#: ``DEPTH_RAMP = (A, o0, o1)``, ``o`` how far the pixel's plane misses its depth
-#: :data:`DEPTH_SPAN` cells away on the better side of each axis (a slope: footprints per
-#: cell, :func:`_offsets_rows`). A face narrower than the windows (a kerb's riser, a pole)
-#: takes the normal of the face beside it, coherently, and no spread sees it; its own depth
-#: does. Session 14: chosen by a grid search (A, the exponent, o0, o1) on the training split's
-#: decile bins (kinect_v1, realsense, the two real training folders); realsense then passed
-#: every bin on seeds 0-3 (was 9 / 8 / 10 / 9).
-DEPTH_RAMP = (3.0, 0.8, 1.5)
-DEPTH_SPAN = 3
+#: Measured support, last: the map ``m`` plus ``A t^2 min(m / DEPTH_FULL, 1)``, ``t =
+#: clip((r - r0) / (r1 - r0), 0, 1)``, ``DEPTH_RAMP = (A, r0, r1)``. ``r`` is how far the
+#: pixel's plane misses its depth against the frame's own reading of it: for each span ``d``
+#: of :data:`DEPTH_SPANS` cells the offset ``o_d`` (per axis, where the depth leaves the plane
+#: on both sides in opposite directions, the lesser; the larger axis: a slope, footprints per
+#: cell, :func:`_offsets_rows`) over ``sqrt(growth)`` times ``Q_d``, the frame's
+#: :data:`DEPTH_QUANTILE` th percentile of ``o_d / sqrt(growth)`` (every
+#: :data:`MEDIAN_STEP`-th row and column, :func:`_offset_scales`); the lesser of the spans. A
+#: face narrower than the windows (a kerb's riser, a pole) takes the normal of the face beside
+#: it, coherently, and no spread sees it; its own depth does: it rises on one side and falls
+#: on the other by about the sine of the angle at every span, where noise and quantisation
+#: steps leave the plane by a bounded depth (a slope falling as ``1 / d``), the same way on
+#: both sides where the pixel's own depth is off. ``A`` is about the error of such a pixel
+#: times the share of them (session 15: 30-60 deg at ``r > 1.5``, ``m >= 2`` deg on kinect_v1
+#: and realsense, 10-20 on the real frames' plane pixels). Session 15 (replacing session 14's
+#: absolute ramp ``3 m^(1/4) clip((o_3 - 0.8) / 0.7, 0, 1)`` of the lesser side's magnitude,
+#: which read a pixel's own noise and the far quantisation steps as a miss): a grid search on
+#: the training split's decile bins (kinect_v1, realsense, the two real training folders).
+DEPTH_RAMP = (55.0, 0.7, 2.5)
+DEPTH_SPANS = (3, 6)
+DEPTH_QUANTILE = 90.0
+DEPTH_FULL = 0.5
 #: The near spread ``s_N`` of both noisy maps: cells of the map's grid (the box-fit's is
 #: the pixel grid; the measured support's is mostly the half grid, 6 pixels).
 NEAR_SPAN = 3
@@ -447,13 +460,13 @@ def _support_rows(v0, v1, z, normals, model, ctx, out):
 
     ``model = (e_i, zref, half)``: the interior error ``e_i`` (degrees at ``zref``), growing
     with depth as the square root of the plane residual, ``(z / zref)^(half / 4)``. ``ctx =
-    (s1, far, sub, shift, offsets)`` from :func:`_context` on this grid. Per pixel the product
-    of powers of :data:`SUPPORT_MAP` and :data:`SUPPORT_POW` (module doc), at least
-    :data:`LEVEL_FLOOR` ``lev``, plus the ramp :data:`DEPTH_RAMP` of the offsets; NaN where the
-    normal is NaN.
+    (s1, far, sub, shift, offsets, inv_q)`` from :func:`_context` on this grid, ``inv_q`` the
+    inverse of :func:`_offset_scales` (0: no ramp). Per pixel the product of powers of
+    :data:`SUPPORT_MAP` and :data:`SUPPORT_POW` (module doc), at least :data:`LEVEL_FLOOR`
+    ``lev``, plus the ramp :data:`DEPTH_RAMP` of the offsets; NaN where the normal is NaN.
     Every loop runs along a row."""
     e_i, zref, half = model
-    s1, far, sub, sh, offs = ctx
+    s1, far, sub, sh, offs, inv_q = ctx
     w = z.shape[1]
     f32 = np.float32
     izref = f32(1.0 / zref if zref > 0.0 else 0.0)
@@ -469,19 +482,25 @@ def _support_rows(v0, v1, z, normals, model, ctx, out):
     ra = f32(DEPTH_RAMP[0])
     r0 = f32(DEPTH_RAMP[1])
     ri = f32(1.0 / (DEPTH_RAMP[2] - DEPTH_RAMP[1]))
+    fu = f32(1.0 / DEPTH_FULL)
+    q0 = f32(inv_q[0])
+    q1 = f32(inv_q[1])
     f2 = np.empty((2, w), dtype=f32)  # the row's densities from the half grid
     lev = np.empty(w, dtype=f32)
+    grow = np.empty(w, dtype=f32)
     for v in range(v0, v1):
         _half_row(sub, v, sh, f2)
         zrow = z[v]
         for u in range(w):
             zq = zrow[u]
-            lev[u] = ei * np.sqrt(_growth(zq, izref, half)) if zq == zq else ei
+            grow[u] = np.sqrt(_growth(zq, izref, half)) if zq == zq else f32(1.0)
+            lev[u] = ei * grow[u]
         a = s1[v]
         b = far[0, v]
         jump = f2[0]
         steps = f2[1]
-        g = offs[v]
+        o3 = offs[0, v]
+        o6 = offs[1, v]
         for u in range(w):
             e = lev[u]
             e = e if e > fl else fl
@@ -494,10 +513,15 @@ def _support_rows(v0, v1, z, normals, model, ctx, out):
             m = c0 * (f32(1.0) + c1 * jump[u]) * _root8(p)
             lo = fi * e
             m = m if m > lo else lo
-            t = (g[u] - r0) * ri
+            r = o3[u] * q0
+            r6 = o6[u] * q1
+            r = r if r < r6 else r6
+            t = (r / grow[u] - r0) * ri
             t = t if t > f32(0.0) else f32(0.0)
             t = t if t < f32(1.0) else f32(1.0)
-            lev[u] = m + ra * np.sqrt(np.sqrt(m)) * t
+            full = m * fu
+            full = full if full < f32(1.0) else f32(1.0)
+            lev[u] = m + ra * t * t * full
         for u in range(w):
             nx = normals[v, u, 0]
             out[v, u] = lev[u] if nx == nx else nan
@@ -733,14 +757,29 @@ def _spreads_rows(v0, v1, planar, near_d, far_d, out):
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _offset_min_into(x, y, t, px, py, pz, qx, qy, qz, inv, out_best):
-    """``out_best = min(out_best, |n . (Q - P)| inv)`` elementwise over a row: ``n = (x, y, t)``
-    the normals, ``P`` and ``Q`` the points (NaN where a depth is invalid: then nothing is
-    taken), ``inv`` per pixel (slices from 0: it vectorises)."""
+def _offset_into(x, y, t, px, py, pz, qx, qy, qz, inv, out):
+    """``out = n . (Q - P) inv`` elementwise over a row (signed): ``n = (x, y, t)`` the normals,
+    ``P`` and ``Q`` the points (NaN where a depth is invalid), ``inv`` per pixel (slices from
+    0: it vectorises)."""
+    for i in range(out.size):
+        out[i] = (x[i] * (qx[i] - px[i]) + y[i] * (qy[i] - py[i]) + t[i] * (qz[i] - pz[i])) * inv[i]
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _straddle_into(a, b, out_best):
+    """``out_best = max(out_best, min(|a|, |b|))`` where ``a`` and ``b`` have opposite signs
+    (the depth on both sides of the pixel leaves its plane, one side above and one below: a
+    tilt); nothing where they share a sign (the pixel's own depth off its plane, or a step on
+    one side) or one is NaN."""
     for i in range(out_best.size):
-        r = abs(x[i] * (qx[i] - px[i]) + y[i] * (qy[i] - py[i]) + t[i] * (qz[i] - pz[i])) * inv[i]
-        b = out_best[i]
-        out_best[i] = r if r < b else b
+        x = a[i]
+        y = b[i]
+        if x * y < 0.0:
+            m = abs(x)
+            ay = abs(y)
+            m = m if m < ay else ay
+            if m > out_best[i]:
+                out_best[i] = m
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -757,50 +796,56 @@ def _row_points(z, v, rx, ry, out):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _offsets_rows(v0, v1, z, planar, d, cam, out):
-    """Rows ``[v0, v1)``: how far the pixel's own plane misses the depth ``d`` cells away
-    (:data:`DEPTH_SPAN`), as a slope: per axis the least, over the two sides, of ``|n . (Q -
-    P)|`` in footprints (``z / fx``) per cell (``P`` the pixel's point, ``Q`` the neighbour's,
-    ``n`` the pixel's normal from ``planar`` (H, 3, W)), then the larger of the two axes; 0
-    where no side has a valid depth. A normal that fits its own depth on either side along
-    both axes reads the noise (a pixel beside a crease sees the crease on one side only); one
-    taken from another face than its own depth's (a face narrower than the windows) reads
-    about the sine of the angle between them."""
+def _offsets_rows(v0, v1, z, planar, spans, cam, out):
+    """Rows ``[v0, v1)``: how far the pixel's own plane misses the depth ``d`` cells away, for
+    each ``d`` of ``spans`` into ``out[i]`` ((S, H, W)), as a slope in footprints (``z / fx``)
+    per cell: per axis, where ``n . (Q - P)`` (``P`` the pixel's point, ``Q`` the neighbour's
+    ``d`` cells away, ``n`` the pixel's normal from ``planar`` (H, 3, W)) has opposite signs on
+    the two sides, the lesser magnitude; else 0; the larger of the two axes. A normal taken
+    from another face than its own depth's (a face narrower than the windows) sees its depth
+    rise on one side and fall on the other, by about the sine of the angle between them; a
+    pixel beside a crease or a step sees it on one side only, and a pixel whose own depth is
+    off its plane (noise) sees both sides leave it the same way: both read 0."""
     h, w = z.shape
     f32 = np.float32
-    inf = f32(np.inf)
+    nan = f32(np.nan)
     fx, fy, cx, cy = cam
     rx = ((np.arange(w) - cx) / fx).astype(f32)
     p = np.empty((3, w), dtype=f32)
     q = np.empty((3, w), dtype=f32)
     inv = np.empty(w, dtype=f32)
-    bh = np.empty(w, dtype=f32)
-    bv = np.empty(w, dtype=f32)
-    fd = f32(fx / d)
+    a = np.empty(w, dtype=f32)
+    b = np.empty(w, dtype=f32)
+    best = np.empty(w, dtype=f32)
     for v in range(v0, v1):
         row = planar[v]
         x, y, t = row[0], row[1], row[2]
         _row_points(z, v, rx, f32((v - cy) / fy), p)
         zr = z[v]
         for u in range(w):
-            inv[u] = fd / zr[u]
-        bh[:] = inf
-        bv[:] = inf
-        if d < w:
-            hi = w - d
-            _offset_min_into(x[:hi], y[:hi], t[:hi], p[0, :hi], p[1, :hi], p[2, :hi], p[0, d:],
-                             p[1, d:], p[2, d:], inv[:hi], bh[:hi])
-            _offset_min_into(x[d:], y[d:], t[d:], p[0, d:], p[1, d:], p[2, d:], p[0, :hi],
-                             p[1, :hi], p[2, :hi], inv[d:], bh[d:])
-        for r in (v + d, v - d):
-            if 0 <= r < h:
-                _row_points(z, r, rx, f32((r - cy) / fy), q)
-                _offset_min_into(x, y, t, p[0], p[1], p[2], q[0], q[1], q[2], inv, bv)
-        o = out[v]
-        for u in range(w):
-            a = bh[u] if bh[u] < inf else f32(0.0)
-            b = bv[u] if bv[u] < inf else f32(0.0)
-            o[u] = a if a > b else b
+            inv[u] = f32(fx) / zr[u]
+        for i in range(len(spans)):
+            d = spans[i]
+            best[:] = 0.0
+            if d < w:
+                hi = w - d
+                a[hi:] = nan
+                b[:d] = nan
+                _offset_into(x[:hi], y[:hi], t[:hi], p[0, :hi], p[1, :hi], p[2, :hi],
+                             p[0, d:], p[1, d:], p[2, d:], inv[:hi], a[:hi])
+                _offset_into(x[d:], y[d:], t[d:], p[0, d:], p[1, d:], p[2, d:], p[0, :hi],
+                             p[1, :hi], p[2, :hi], inv[d:], b[d:])
+                _straddle_into(a, b, best)
+            if v + d < h and v - d >= 0:
+                _row_points(z, v + d, rx, f32((v + d - cy) / fy), q)
+                _offset_into(x, y, t, p[0], p[1], p[2], q[0], q[1], q[2], inv, a)
+                _row_points(z, v - d, rx, f32((v - d - cy) / fy), q)
+                _offset_into(x, y, t, p[0], p[1], p[2], q[0], q[1], q[2], inv, b)
+                _straddle_into(a, b, best)
+            o = out[i, v]
+            k = f32(1.0 / d)
+            for u in range(w):
+                o[u] = best[u] * k
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -859,21 +904,57 @@ def _box_row(ii, v, r, lo, hi, inv, out):
         out[u] = (rb[d] - ra[d] - rb[c] + ra[c]) * (iv * inv[u])
 
 
-def _context(zg, ng, big: int, cam: tuple, shift: int = 1) -> tuple:
+def _context(zg, ng, big: int, cam: tuple, shift: int = 1, *,
+             growth: tuple = (1.0, 0)) -> tuple:
     """What the measured support's map reads besides its level, on the grid of its choice
     (depth ``zg``, NaN where invalid, normals ``ng``, camera ``cam`` of that grid): the mean
     angle of the normals :data:`NEAR_SPAN` away (H, W) and ``big`` away (1, H, W), each to
     the right, left, below and above (:func:`_spreads_rows`), :func:`_densities` on every
     ``2^shift``-th row and column of that grid, and how far the pixels' planes miss their
-    depth :data:`DEPTH_SPAN` away (:func:`_offsets_rows`)."""
+    depth at each of :data:`DEPTH_SPANS` (2, H, W) (:func:`_offsets_rows`) with the inverse
+    of their frame scales (:func:`_offset_scales`; ``growth = (zref, half)`` as in
+    :func:`_support_rows`)."""
     h, w = zg.shape
     planar = np.ascontiguousarray(ng.transpose(0, 2, 1))
     spreads = np.empty((2, h, w), dtype=np.float32)
     run_rows(_spreads_rows, h, planar, NEAR_SPAN, max(1, big), spreads, min_rows=16)
-    offsets = np.empty((h, w), dtype=np.float32)
-    run_rows(_offsets_rows, h, zg, planar, DEPTH_SPAN, tuple(float(c) for c in cam), offsets,
+    offsets = np.empty((len(DEPTH_SPANS), h, w), dtype=np.float32)
+    run_rows(_offsets_rows, h, zg, planar, DEPTH_SPANS, tuple(float(x) for x in cam), offsets,
              min_rows=16)
-    return spreads[0], spreads[1:], _densities(zg, big, shift), shift, offsets
+    scales = _offset_scales(zg, ng, offsets, *growth)
+    inv_q = tuple(1.0 / q if q > 0.0 else 0.0 for q in scales)
+    return spreads[0], spreads[1:], _densities(zg, big, shift), shift, offsets, inv_q
+
+
+def _offset_scales(zg, ng, offsets, zref: float, half: int) -> np.ndarray:
+    """The frame's scale of each span's offsets (:data:`DEPTH_SPANS`): the
+    :data:`DEPTH_QUANTILE` th percentile of ``o / sqrt(growth)`` (``(z / zref)^(half / 4)``, 1
+    where the depth is invalid) over every :data:`MEDIAN_STEP`-th row and column where the
+    normal is valid and the offset positive; 0 where there is none."""
+    izref = 1.0 / zref if zref > 0.0 else 0.0
+    return np.array([_scale_of(offsets[i], zg, ng[..., 0], MEDIAN_STEP, np.float32(izref), half,
+                               DEPTH_QUANTILE) for i in range(len(DEPTH_SPANS))])
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _scale_of(o, z, nx, st, izref, half, q):
+    """The ``q`` th percentile of ``o / sqrt(growth)`` (:func:`_growth`) over every ``st``-th
+    row and column of ``o`` (H, W) where ``nx`` (a normal's component) is valid and ``o``
+    positive; 0 where there is none."""
+    h, w = o.shape
+    buf = np.empty(((h + st - 1) // st) * ((w + st - 1) // st), dtype=np.float32)
+    k = 0
+    for v in range(0, h, st):
+        for u in range(0, w, st):
+            x = o[v, u]
+            if x > 0.0 and nx[v, u] == nx[v, u]:
+                zq = z[v, u]
+                g = np.sqrt(_growth(zq, izref, half)) if zq == zq else np.float32(1.0)
+                buf[k] = x / g
+                k += 1
+    if k == 0:
+        return 0.0
+    return np.percentile(buf[:k], q)
 
 
 def _densities(zg, big: int, shift: int) -> np.ndarray:
@@ -1063,12 +1144,13 @@ def _support_branch(z, cam, sigma, prof):
     model = (float(e_i), float(zref), half)
     big = min(MAX_RADIUS, round(BIG_FACTOR * prof.radius))
     if half_n is None:
-        ctx = _context(z, out, big, cam)
+        ctx = _context(z, out, big, cam, growth=model[1:])
         unc = np.empty(z.shape, dtype=np.float32)
         run_rows(_support_rows, z.shape[0], z, out, model, ctx, unc, min_rows=16)
         return out, unc
     zd = np.ascontiguousarray(z[::2, ::2])
-    ctx = _context(zd, half_n, big // 2, (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy))
+    ctx = _context(zd, half_n, big // 2, (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy),
+                   growth=model[1:])
     coarse = np.empty(zd.shape, dtype=np.float32)  # a cell of invalid depth reads e_i
     run_rows(_support_rows, zd.shape[0], zd, half_n, model, ctx, coarse, min_rows=8)
     unc = np.empty(z.shape, dtype=np.float32)
@@ -1080,16 +1162,23 @@ def _support_branch(z, cam, sigma, prof):
 def _upsample_rows(v0, v1, coarse, z, out):
     """Rows ``[v0, v1)``: ``out[v, u] = coarse[v // 2, u // 2]``, NaN where the depth ``z``
     is (the branch's normal is NaN exactly there and where its cell's is, whose ``coarse`` is
-    NaN). Every loop runs along a row."""
+    NaN). Every loop runs along a row, without a branch (``x - x`` is 0, or NaN where the depth
+    ``x`` is)."""
     w = out.shape[1]
-    nan = np.float32(np.nan)
+    h2 = w >> 1
     for v in range(v0, v1):
         c = coarse[v >> 1]
         zr = z[v]
         o = out[v]
-        for u in range(w):
-            x = zr[u]
-            o[u] = c[u >> 1] if x == x else nan
+        for j in range(h2):
+            x = zr[2 * j]
+            y = zr[2 * j + 1]
+            cj = c[j]
+            o[2 * j] = cj + (x - x)
+            o[2 * j + 1] = cj + (y - y)
+        if w & 1:
+            x = zr[w - 1]
+            o[w - 1] = c[h2] + (x - x)
 
 
 def _clean_branch(z, cam, sigma):
