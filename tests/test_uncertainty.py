@@ -628,18 +628,18 @@ def test_edge_integrals_match_numpy():
 
 def test_box_fit_ramp_and_high_factor():
     """The box-fit branch's last pass: times ``BOX_HIGH[1]`` where the noise error exceeds
-    its bound, then the monotone ramp ``BOX_RAMP``: unchanged up to 8 deg, x1.125 at 12 deg,
-    x1.25 from 16 deg; NaN stays NaN."""
+    its bound, then the monotone ramp ``BOX_RAMP``: unchanged up to 8 deg, x1.125 at 10 deg,
+    x1.25 from 12 deg; NaN stays NaN."""
     from depthnormals.ddm import uncertainty as U
 
     a, m0, m1 = U.BOX_RAMP
-    assert (a, m0, m1) == (0.25, 8.0, 16.0)
-    m = np.array([[1.0, 8.0, 12.0, 16.0, 40.0, np.nan, 20.0]], np.float32)
+    assert (a, m0, m1) == (0.25, 8.0, 12.0)
+    m = np.array([[1.0, 8.0, 10.0, 12.0, 40.0, np.nan, 20.0]], np.float32)
     e = np.array([[0.1, 0.1, 0.1, 0.1, 0.1, 0.1, 5.0]], np.float32)  # the last one high
     out = m.copy()
     U._box_final_rows(0, 1, e, 1.0, out)
     hi = 20.0 * U.BOX_HIGH[1]
-    want = [1.0, 8.0, 12.0 * 1.125, 20.0, 50.0, np.nan,
+    want = [1.0, 8.0, 10.0 * 1.125, 15.0, 50.0, np.nan,
             hi * (1.0 + a * min(1.0, max(0.0, (hi - m0) / (m1 - m0))))]
     np.testing.assert_allclose(out[0], want, rtol=1e-6)
     ramp = np.linspace(0.0, 60.0, 601, dtype=np.float32)[None]
