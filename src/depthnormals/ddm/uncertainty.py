@@ -503,8 +503,8 @@ def _support_rows(v0, v1, z, normals, model, ctx, out):
         b = far[0, v]
         jump = f2[0]
         steps = f2[1]
-        o3 = offs[0, v]
-        o6 = offs[1, v]
+        oa = offs[0, v]  # the two spans of DEPTH_SPANS
+        ob = offs[1, v]
         for u in range(w):
             e = lev[u]
             e = e if e > fl else fl
@@ -517,9 +517,9 @@ def _support_rows(v0, v1, z, normals, model, ctx, out):
             m = c0 * (f32(1.0) + c1 * jump[u]) * _root8(p)
             lo = fi * e
             m = m if m > lo else lo
-            r = o3[u] * q0
-            r6 = o6[u] * q1
-            r = r if r < r6 else r6
+            r = oa[u] * q0
+            rb = ob[u] * q1
+            r = r if r < rb else rb
             t = (r / grow[u] - r0) * ri
             t = t if t > f32(0.0) else f32(0.0)
             t = t if t < f32(1.0) else f32(1.0)
@@ -915,7 +915,7 @@ def _context(zg, ng, big: int, cam: tuple, shift: int = 1, *,
     angle of the normals :data:`NEAR_SPAN` away (H, W) and ``big`` away (1, H, W), each to
     the right, left, below and above (:func:`_spreads_rows`), :func:`_densities` on every
     ``2^shift``-th row and column of that grid, and how far the pixels' planes miss their
-    depth at each of :data:`DEPTH_SPANS` (2, H, W) (:func:`_offsets_rows`) with the inverse
+    depth at each of :data:`DEPTH_SPANS` (S, H, W) (:func:`_offsets_rows`) with the inverse
     of their frame scales (:func:`_offset_scales`; ``growth = (zref, half)`` as in
     :func:`_support_rows`)."""
     h, w = zg.shape
