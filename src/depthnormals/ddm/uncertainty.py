@@ -101,6 +101,7 @@ from .support import (
     MAX_RADIUS,
     PAIR_TO_ERROR,
     SupportProfile,
+    _gate_growth,
     support_profile,
     support_select,
 )
@@ -389,12 +390,18 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
 @nb.njit(cache=True, error_model="numpy", inline="always")
 def _growth(zq, izref, half):
     """``(z / zref)^(half / 2)`` (``izref = 1 / zref``, ``half`` an integer 0..4), without a
-    transcendental function: how the plane residual grows with depth."""
-    t = np.float32(zq) * izref
-    q = np.sqrt(t)
+    transcendental function: how the plane residual grows with depth (the support gates'
+    :func:`~depthnormals.ddm.support._gate_growth`, 1 at ``half = 0``)."""
     if half == 0:
         return np.float32(1.0)
-    return t * t if half == 4 else (t * q if half == 3 else (t if half == 2 else q))
+    return _gate_growth(zq, izref, half)
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _root_growth(zq, izref, half):
+    """``sqrt(growth)`` (:func:`_growth`), the noise's growth with depth; 1 where the depth
+    ``zq`` is invalid (NaN)."""
+    return np.sqrt(_growth(zq, izref, half)) if zq == zq else np.float32(1.0)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -496,8 +503,7 @@ def _support_rows(v0, v1, z, normals, model, ctx, out):
         _half_row(sub, v, sh, f2)
         zrow = z[v]
         for u in range(w):
-            zq = zrow[u]
-            grow[u] = np.sqrt(_growth(zq, izref, half)) if zq == zq else f32(1.0)
+            grow[u] = _root_growth(zrow[u], izref, half)
             lev[u] = ei * grow[u]
         a = s1[v]
         b = far[0, v]
@@ -908,8 +914,7 @@ def _box_row(ii, v, r, lo, hi, inv, out):
         out[u] = (rb[d] - ra[d] - rb[c] + ra[c]) * (iv * inv[u])
 
 
-def _context(zg, ng, big: int, cam: tuple, shift: int = 1, *,
-             growth: tuple = (1.0, 0)) -> tuple:
+def _context(zg, ng, big: int, cam: tuple, shift: int = 1, *, growth: tuple) -> tuple:
     """What the measured support's map reads besides its level, on the grid of its choice
     (depth ``zg``, NaN where invalid, normals ``ng``, camera ``cam`` of that grid): the mean
     angle of the normals :data:`NEAR_SPAN` away (H, W) and ``big`` away (1, H, W), each to
@@ -942,7 +947,7 @@ def _offset_scales(zg, ng, offsets, zref: float, half: int) -> np.ndarray:
 
 @nb.njit(cache=True, error_model="numpy")
 def _scale_of(o, z, nx, st, izref, half, q):
-    """The ``q`` th percentile of ``o / sqrt(growth)`` (:func:`_growth`) over every ``st``-th
+    """The ``q`` th percentile of ``o / sqrt(growth)`` (:func:`_root_growth`) over every ``st``-th
     row and column of ``o`` (H, W) where ``nx`` (a normal's component) is valid and ``o``
     positive; 0 where there is none."""
     h, w = o.shape
@@ -952,9 +957,7 @@ def _scale_of(o, z, nx, st, izref, half, q):
         for u in range(0, w, st):
             x = o[v, u]
             if x > 0.0 and nx[v, u] == nx[v, u]:
-                zq = z[v, u]
-                g = np.sqrt(_growth(zq, izref, half)) if zq == zq else np.float32(1.0)
-                buf[k] = x / g
+                buf[k] = x / _root_growth(z[v, u], izref, half)
                 k += 1
     if k == 0:
         return 0.0
