@@ -139,9 +139,31 @@ def test_depth_exponent_reads_the_growth_of_the_residual():
 
 def _reference_choice(z, args):
     out = np.empty((*z.shape, 3), dtype=np.float32)
+    dev = np.empty(z.shape, dtype=np.float32)
     for v in range(z.shape[0]):
         for u in range(z.shape[1]):
-            out[v, u] = support.choose_pixel(z, *args, v, u)
+            *out[v, u], dev[v, u] = support.choose_pixel(z, *args, v, u)
+    return out, dev
+
+
+def _reference_fallback(z, cam, dev, out):
+    """Where ``dev`` exceeds DEVIATION: the least residual of the nine radius-2 windows, turned
+    toward the pixel's ray."""
+    from depthnormals.ddm.boxfit import box_fit_windows
+
+    fx, fy, cx, cy = cam
+    out = out.copy()
+    rs = support.FALLBACK_RADIUS
+    n, score = box_fit_windows(z, fx, fy, cx, cy, rs)
+    h, w = z.shape
+    for v, u in zip(*np.nonzero(dev > support.DEVIATION)):
+        cand = [(score[v + rs * dv, u + rs * du], v + rs * dv, u + rs * du)
+                for dv, du in support.SHIFTS
+                if 0 <= v + rs * dv < h and 0 <= u + rs * du < w]
+        s, r, c = min(cand, key=lambda x: x[0])  # the first of equal ones
+        if s < np.inf:
+            m = n[:, r, c]
+            out[v, u] = -m if m @ [(u - cx) / fx, (v - cy) / fy, 1.0] > 0 else m
     return out
 
 
@@ -162,18 +184,27 @@ def test_fast_choice_agrees_with_the_per_pixel_reference(radius):
     # the rows against the per-pixel reference, at full resolution
     args = support.choice_inputs(z, cam.fx, cam.fy, cam.cx, cam.cy, prof)
     fast = np.empty((*z.shape, 3), dtype=np.float32)
-    run_rows(support._choose_least_rows, z.shape[0], z, *args, fast, min_rows=16)
-    assert np.array_equal(fast, _reference_choice(z, args), equal_nan=True)
-    # the branch: below HALF_RADIUS those rows; from it on the choice of every 2x2 cell
+    fast_dev = np.empty(z.shape, dtype=np.float32)
+    run_rows(support._choose_least_rows, z.shape[0], z, *args, fast, fast_dev, min_rows=16)
+    ref, ref_dev = _reference_choice(z, args)
+    assert np.array_equal(fast, ref, equal_nan=True)
+    assert np.allclose(fast_dev, ref_dev, rtol=1e-5, atol=1e-5)
+    # some pixels of the box's faces deviate, most do not
+    assert 0.0 < np.mean(fast_dev > support.DEVIATION) < 0.05
+    # the branch: below HALF_RADIUS those rows; from it on the choice of every 2x2 cell; then
+    # the fallback of the deviating pixels
     out = support.support_select(z, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma, profile=prof)
     if radius < support.HALF_RADIUS:
-        assert np.array_equal(out, fast, equal_nan=True)
+        assert np.array_equal(out, _reference_fallback(z, args[4], fast_dev, fast),
+                              equal_nan=True)
     else:
         zd = np.ascontiguousarray(z[::2, ::2])
         hargs = support.choice_inputs(zd, cam.fx / 2, cam.fy / 2, cam.cx / 2, cam.cy / 2, prof,
                                       radius=radius // 2, score_scale=4.0)
         zfill = np.where(np.isnan(zd), np.float32(prof.depth), zd)
-        half = _reference_choice(zfill, hargs)
+        half, hdev = _reference_choice(zfill, hargs)
+        hdev[np.isnan(zd)] = 0.0
+        half = _reference_fallback(zd, hargs[4], hdev, half)
         up = np.repeat(np.repeat(half, 2, axis=0), 2, axis=1)[:z.shape[0], :z.shape[1]]
         ok = np.isfinite(out[..., 0])
         # the same window's normal, turned toward each pixel's own ray
@@ -229,3 +260,73 @@ def test_batched_profile_statistics_equal_the_per_frame_ones():
     empty = [(np.zeros((2, 0, 3)), np.zeros((2, 0), dtype=bool)) for _ in RADII]  # no pair
     assert [repr(q) for q in profiles_from_pair_tables(empty, [0.1, 0.2])] == \
         [repr(profile_from_pairs(lambda r: np.zeros((0, 3)), s)) for s in (0.1, 0.2)]
+
+
+def _table_edge(shape=(240, 320), f=290.0):
+    """A table top 0.30 m below the camera from 1.5 m on, its front face 5 cm thick (a strip
+    of 10 rows at 1.5 m) and a wall at 3 m below it: depth (H, W), normals, K, the strip."""
+    h, w = shape
+    cx, cy = (w - 1) / 2.0, (h - 1) / 2.0
+    K = np.array([[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]])
+    v = np.mgrid[0:h, 0:w][0].astype(float)
+    ry = (v - cy) / f
+    z = np.full(shape, 3.0)
+    n = np.zeros((h, w, 3))
+    n[..., 2] = -1.0
+    with np.errstate(divide="ignore"):
+        zt = 0.30 / ry
+    top = (ry > 0) & (zt >= 1.5)
+    z[top] = zt[top]
+    n[top] = (0.0, -1.0, 0.0)
+    front = (ry * 1.5 >= 0.30) & (ry * 1.5 <= 0.35)
+    z[front] = 1.5
+    n[front] = (0.0, 0.0, -1.0)
+    return z.astype(np.float32), n.astype(np.float32), K, front
+
+
+def test_a_face_narrower_than_the_windows_falls_back_to_small_windows(monkeypatch):
+    """The front face of a table (10 rows) under Kinect v1 noise: the measured support's
+    windows (radius >= 6) hold more of the top than of the face, so the face took the top's
+    normal (89 deg off). Its depth lies many standard deviations off that plane: it takes a
+    small window instead (35-40 deg off: quantised depth over 5x5 cells), and the frame's mean
+    error drops."""
+    from depthnormals.synth.noise import kinect_v1_noise
+
+    z, normals, K, front = _table_edge()
+    rows = np.nonzero(front.any(axis=1))[0]
+    inner = np.zeros_like(front)
+    inner[rows[0] + 1:rows[-1], 20:-20] = True  # the face's rows but its first and last
+    inner &= front
+    d = kinect_v1_noise(z, normals, K, rng=np.random.default_rng(0))
+    assert dn.noise_profile(d, K).branch == "measured-support"
+    assert dn.noise_profile(d, K).radius >= support.HALF_RADIUS
+
+    def errors():
+        e = dn.angular_error(dn.estimate_normals(d, K), normals)
+        return float(np.nanmean(e[inner])), float(np.nanmean(e))
+
+    face, frame = errors()
+    monkeypatch.setattr(support, "DEVIATION", np.inf)
+    face_before, frame_before = errors()
+    assert face_before > 85.0  # the top's normal
+    assert face < 45.0
+    assert frame < frame_before - 0.1
+
+
+def test_few_pixels_of_a_plane_deviate():
+    """On one plane under correlated Kinect-like noise the deviation from the chosen window's
+    plane is a residual in units of its own measured spread: about half-normal (median near
+    0.67), and beyond DEVIATION on almost no pixel."""
+    from depthnormals.synth.noise import kinect_v1_noise
+
+    r = make_scene("tilted-plane").render(shape=(240, 320), K=(290.0, 290.0, 159.5, 119.5))
+    d = kinect_v1_noise(r.depth, r.normals, r.K, rng=np.random.default_rng(2))
+    zp, cam = prepare(d, r.K, None)
+    p = noise_pass(zp, cam.fx, cam.fy)
+    scores: list = []
+    support.support_select(zp, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma, out_scores=scores)
+    dev = scores[3]
+    ok = dev > 0
+    assert ok.mean() > 0.9
+    assert 0.4 < float(np.median(dev[ok])) < 1.0
+    assert float(np.mean(dev[ok] > support.DEVIATION)) < 1e-3

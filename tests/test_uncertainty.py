@@ -533,7 +533,8 @@ def test_support_map_adds_the_depth_ramp():
         offs = np.stack([np.float32([o3]), np.float32([o6])])
         s1 = np.full((1, w), spreads[0], np.float32)
         far = np.full((1, 1, w), spreads[1], np.float32)
-        U._support_rows(0, 1, z, n, model, (s1, far, sub, 0, offs, inv_q), out)
+        zero = np.zeros((1, w), np.float32)
+        U._support_rows(0, 1, z, n, model, (s1, far, sub, 0, offs, inv_q, zero), out)
         return out[0]
 
     m = run([0.0] * w, [0.0] * w)
@@ -555,6 +556,37 @@ def test_support_map_adds_the_depth_ramp():
     m_lo = run([0.0] * w, [0.0] * w, model=(0.2, 2.0, 0), spreads=(0.1, 0.1))
     assert np.all(m_lo[:7] < U.DEPTH_FULL)
     np.testing.assert_allclose(lo[:7], m_lo[:7] + a * m_lo[:7] / U.DEPTH_FULL, rtol=1e-5)
+
+
+def test_support_map_reads_the_fallback():
+    """A pixel that fell back to small windows (deviation > DEVIATION) reads FALLBACK_SCALE
+    times the map of the choice before the fallback; the others as before; NaN stays NaN."""
+    from depthnormals.ddm import uncertainty as U
+    from depthnormals.ddm.support import DEVIATION
+
+    assert U.FALLBACK_SCALE == 0.8
+    w = 8
+    z = np.full((1, w), 2.0, np.float32)
+    n = np.zeros((1, w, 3), np.float32)
+    n[..., 2] = -1.0
+    n[0, 7] = np.nan
+    sub = np.zeros((2, 1, w), np.float32)
+
+    def run(dev):
+        out = np.empty((1, w), np.float32)
+        offs = np.zeros((2, 1, w), np.float32)
+        s1 = np.full((1, w), 2.0, np.float32)
+        far = np.full((1, 1, w), 3.0, np.float32)
+        U._support_rows(0, 1, z, n, (1.0, 2.0, 0), (s1, far, sub, 0, offs, (1.0, 1.0),
+                                                     np.float32([dev])), out)
+        return out[0]
+
+    m = run([0.0] * w)
+    assert np.all(m[:7] > U.DEPTH_FULL) and np.isnan(m[7])
+    got = run([0.0, DEVIATION, DEVIATION + 0.01, 9.0, 0.0, 1.0, 50.0, 9.0])
+    scale = np.float32([1, 1, U.FALLBACK_SCALE, U.FALLBACK_SCALE, 1, 1, U.FALLBACK_SCALE])
+    np.testing.assert_allclose(got[:7], m[:7] * scale, rtol=1e-6)
+    assert np.isnan(got[7])
 
 
 def test_offset_scales_read_the_percentile_over_the_growth():

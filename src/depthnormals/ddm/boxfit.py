@@ -298,6 +298,8 @@ def _fit_rows(v0, v1, z, fx, fy, cx, cy, r, out_n, out_score, out_plane, want_pl
     t2m0 = np.zeros(w)
     acol = np.arange(w) - cx
     pl = out_plane if want_plane else np.empty((3, 1, w), dtype=np.float32)  # scratch
+    ab = np.empty((2, w), dtype=np.float32)  # the slopes where only the centres are wanted
+    only_c = want_plane and out_plane.shape[0] == 1
     nn = out_n if want_n else np.empty((3, 1, w), dtype=np.float32)
     rf = np.float64(r)
     r1 = rf + 1.0
@@ -340,30 +342,37 @@ def _fit_rows(v0, v1, z, fx, fy, cx, cy, r, out_n, out_score, out_plane, want_pl
         if v < v0:  # rows before the band: only to carry the running sums to v0
             continue
         vp = v if want_plane else 0
+        pa = ab[0] if only_c else pl[0, vp]
+        pb = ab[1] if only_c else pl[1, vp]
+        pc = pl[0, vp] if only_c else pl[2, vp]
         if want_n:
             _solve_row(t0, t1m0, t1m1, t1w, t2m0, fx, fy, acol, v - cy, nn[0, v], nn[1, v], nn[2, v],
-                       out_score[v], pl[0, vp], pl[1, vp], pl[2, vp])
+                       out_score[v], pa, pb, pc)
         else:
-            _solve_row_planes(t0, t1m0, t1m1, t1w, t2m0, fx, out_score[v], pl[0, vp], pl[1, vp],
-                              pl[2, vp])
+            _solve_row_planes(t0, t1m0, t1m1, t1w, t2m0, fx, out_score[v], pa, pb, pc)
 
 
 def box_fit_windows(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
-                    radius: int, *, planes: bool = False,
+                    radius: int, *, planes: bool = False, centres: bool = False,
                     normals: bool = True) -> tuple[np.ndarray, ...]:
     """Centred-window fits of prepared depth ``z`` (NaN invalid): planar normals (3, H, W)
     float32 (NaN where a window has no fit) and residual variances (H, W) float32 in
     footprints^2 (inf there). A window needs :data:`MIN_POINTS` valid pixels, not the
     centre's. With ``planes``, also the fitted ``(a, b, c)`` of every window, (3, H, W)
-    float32 (``w = a du + b dv + c`` around its centre). ``normals=False`` leaves the normals
-    out (an empty (3, 1, W) array is returned in their place)."""
+    float32 (``w = a du + b dv + c`` around its centre); with ``centres`` (and not
+    ``planes``), only ``c``, the fitted ``1 / z`` at each window's centre, (H, W) float32.
+    ``normals=False`` leaves the normals out (an empty (3, 1, W) array is returned in their
+    place)."""
     h, w = z.shape
     out_n = np.empty((3, h, w) if normals else (3, 1, w), dtype=np.float32)
     out_s = np.empty((h, w), dtype=np.float32)
-    out_p = np.empty((3, h, w) if planes else (3, 1, w), dtype=np.float32)
+    shape = (3, h, w) if planes else ((1, h, w) if centres else (3, 1, w))
+    out_p = np.empty(shape, dtype=np.float32)
     run_rows(_fit_rows, h, z, float(fx), float(fy), float(cx), float(cy), int(radius), out_n,
-             out_s, out_p, planes, normals, min_rows=16)
-    return (out_n, out_s, out_p) if planes else (out_n, out_s)
+             out_s, out_p, planes or centres, normals, min_rows=16)
+    if planes:
+        return out_n, out_s, out_p
+    return (out_n, out_s, out_p[0]) if centres else (out_n, out_s)
 
 
 @nb.njit(**_JIT)

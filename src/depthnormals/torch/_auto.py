@@ -83,6 +83,11 @@ def _measured(z64, valid, cam, profiles, r: int):
     zref = _col([p.depth for p in profiles], z64)
     half = torch.tensor([round(2.0 * p.exponent) if p.depth == p.depth else 0 for p in profiles],
                         device=z64.device).reshape(-1, 1, 1)
+    # the deviation's unit (ddm.support.choice_inputs): the inverse plane residual, footprints
+    # of the choice's grid (4x the profile's on every second row and column)
+    scale = 1.0 if r < HALF_RADIUS else 4.0
+    res = [p.residual_at(p.radius) for p in profiles]
+    unit = _col([scale / x if x > 0.0 else 0.0 for x in res], z64)
     if r < HALF_RADIUS:
         zs = torch.where(valid, z64, torch.ones_like(z64))
         fits = box_fits(zs, valid, r, cam)
@@ -92,7 +97,8 @@ def _measured(z64, valid, cam, profiles, r: int):
             vd = valid[:, ::2, ::2]
             big = box_fits(zs[:, ::2, ::2], vd, (big_r + 1) // 2, _half(cam))
             big.score = big.score * 4.0
-        return choose_least(zs, valid, fits, big, r, gate, zref, half, cam)
+        return choose_least(zs, valid, fits, big, r, gate, zref, half, cam,
+                            fallback=(unit, zs, valid))
     # every second row and column: windows of half the radius, then every pixel takes its cell's
     rd = round(r / 2)
     vd = valid[:, ::2, ::2]
@@ -107,7 +113,8 @@ def _measured(z64, valid, cam, profiles, r: int):
         big.score = big.score * 16.0
     fill = torch.where(zref == zref, zref, torch.ones_like(zref))
     zfill = torch.where(vd, zd, fill)
-    half_n = choose_least(zfill, torch.ones_like(vd), fits, big, rd, gate, zref, half, camd)
+    half_n = choose_least(zfill, torch.ones_like(vd), fits, big, rd, gate, zref, half, camd,
+                          fallback=(unit, zd, vd))
     return upsample_half(half_n, valid, cam)
 
 

@@ -28,6 +28,7 @@ import torch.nn.functional as F
 
 from ..ddm.auto import _slopes as _auto_slopes
 from ..ddm.boxfit import LOCAL_CAP, MIN_POINTS, SHIFTS
+from ..ddm.support import DEVIATION, FALLBACK_RADIUS
 from ..kernels.eig3 import sym3_adjugate_apply
 from ._common import shift as _at
 
@@ -271,13 +272,58 @@ def _growth(zs: torch.Tensor, zref: torch.Tensor, half: torch.Tensor) -> torch.T
     return torch.where(half > 0, g, torch.ones_like(g))
 
 
+def _fallback(n, dev, zreal, vreal, cam):
+    """:func:`depthnormals.ddm.support._fallback_rows`: where ``dev`` exceeds
+    :data:`~depthnormals.ddm.support.DEVIATION`, the least residual (float32, as the numba
+    kernels store it) of the nine windows of radius
+    :data:`~depthnormals.ddm.support.FALLBACK_RADIUS` that hold the pixel (on the depth
+    ``zreal``, valid where ``vreal``); ``n`` elsewhere."""
+    rs = FALLBACK_RADIUS
+    flag = dev > DEVIATION
+    if not bool(flag.any()):
+        return n
+    small = box_fits(torch.where(vreal, zreal, torch.ones_like(zreal)), vreal, rs, cam)
+    score = small.score
+    zero = torch.zeros_like(score, dtype=torch.long)
+    fx_, fy_, fz_ = _plane_normal(small.a, small.b, small.c, zero, zero, cam)
+    inf = float("inf")
+    best = torch.full_like(score, inf)
+    bx, by, bz = (torch.zeros_like(score) for _ in range(3))
+    for dv, du in _SHIFTS:  # in order: the first of equal scores wins
+        sk = _at(score, rs * dv, rs * du, inf)
+        take = sk < best
+        best = torch.where(take, sk, best)
+        bx, by, bz = (torch.where(take, _at(q, rs * dv, rs * du, 0.0), p)
+                      for p, q in ((bx, fx_), (by, fy_), (bz, fz_)))
+    use = flag & (best < inf)
+    fb = _ray_facing(bx, by, bz, cam, use)
+    return tuple(torch.where(use, q, p) for p, q in zip(n[:3], fb[:3], strict=True)) + (n[3],)
+
+
+def _deviation(zs, a, b, c, du, dv, unit, fac, cam):
+    """:func:`depthnormals.ddm.support._deviation`: how many standard deviations (``unit``
+    the inverse plane residual variance at ``zref``, growing with ``fac``) the depth ``zs``
+    lies off the plane ``w = a du + b dv + c`` (the pixel ``(du, dv)`` from its centre),
+    float32 as that kernel stores it."""
+    with torch.no_grad():
+        w = (c + a * du + b * dv).detach()
+        d = ((1.0 / zs - w) * cam[0] / w).abs() * torch.sqrt(unit / fac.double())
+        return torch.where(torch.isfinite(d), d, torch.zeros_like(d)).float()
+
+
 def choose_least(zs, valid, fits: Fits, big: Fits | None, shift: int, gate: torch.Tensor,
-                 zref: torch.Tensor, half: torch.Tensor, cam, big_scale: int = 2):
+                 zref: torch.Tensor, half: torch.Tensor, cam, big_scale: int = 2,
+                 fallback: tuple | None = None):
     """:func:`depthnormals.ddm.support._choose_least_rows` for a batch: the large window
     (fitted on every second row and column, ``big``; a pixel reads cell (v // 2, u // 2))
     where its score is within the gate, else the centred window within the gate, else the
     least score of the nine (the centred one wins ties); gates (B, 1, 1) in float32 grow
-    with depth as ``(z / zref)^(half / 2)``. Returns (nx, ny, nz, ok) facing the camera."""
+    with depth as ``(z / zref)^(half / 2)``. ``fallback = (unit, zreal, vreal)``: then the
+    pixels whose depth deviates from their window's plane (``unit`` (B, 1, 1) the inverse
+    plane residual variance at ``zref``, footprints of this grid) take small windows on the
+    depth ``zreal`` (valid where ``vreal``; ``zs`` may fill it), as
+    :func:`depthnormals.ddm.support._choose` (where ``shift`` exceeds its radius). Returns
+    (nx, ny, nz, ok) facing the camera."""
     h, w = zs.shape[-2:]
     with torch.no_grad():
         fac = _growth(zs.detach(), zref, half)
@@ -297,13 +343,30 @@ def choose_least(zs, valid, fits: Fits, big: Fits | None, shift: int, gate: torc
     a, b, c, dvs, dus = _gather_plane(fits, kbest, shift)
     nx, ny, nz = _plane_normal(a, b, c, dvs, dus, cam)
     ok = valid & found
+    want = fallback is not None and shift > FALLBACK_RADIUS
+    if want:
+        dev = _deviation(zs, a, b, c, -dus, -dvs, fallback[0], fac, cam)
     if big is not None:
-        bx, by, bz = (q.repeat_interleave(big_scale, -2).repeat_interleave(big_scale, -1)[:, :h, :w]
-                      for q in big.normal())
-        bgood = big.good.repeat_interleave(big_scale, -2).repeat_interleave(big_scale, -1)[:, :h, :w]
+        def up(q):
+            return q.repeat_interleave(big_scale, -2).repeat_interleave(big_scale, -1)[:, :h, :w]
+
+        bx, by, bz = (up(q) for q in big.normal())
+        bgood = up(big.good)
         nx, ny, nz = (torch.where(take_big, q, p) for p, q in ((nx, bx), (ny, by), (nz, bz)))
         ok = ok & torch.where(take_big, bgood, torch.ones_like(ok))
-    return _ray_facing(nx, ny, nz, cam, ok)
+        if want:  # the pixel from its large window's centre, in cells of that grid
+            u = torch.arange(w, device=zs.device).reshape(1, 1, w)
+            v = torch.arange(h, device=zs.device).reshape(1, h, 1)
+            bdu = (u - big_scale * (u // big_scale)).to(zs.dtype) / big_scale
+            bdv = (v - big_scale * (v // big_scale)).to(zs.dtype) / big_scale
+            bdev = _deviation(zs, up(big.a), up(big.b), up(big.c), bdu, bdv, fallback[0], fac,
+                              cam)
+            dev = torch.where(take_big, bdev, dev)
+    n = _ray_facing(nx, ny, nz, cam, ok)
+    if not want:
+        return n
+    dev = torch.where(ok & fallback[2], dev, torch.zeros_like(dev))
+    return _fallback(n, dev, fallback[1], fallback[2], cam)
 
 
 def upsample_half(n, valid_full, cam_full):
