@@ -156,7 +156,7 @@ def _reference_fallback(z, cam, dev, out):
     rs = support.FALLBACK_RADIUS
     n, score = box_fit_windows(z, fx, fy, cx, cy, rs)
     h, w = z.shape
-    for v, u in zip(*np.nonzero(dev > support.DEVIATION)):
+    for v, u in zip(*np.nonzero(dev > support.DEVIATION), strict=False):
         cand = [(score[v + rs * dv, u + rs * du], v + rs * dv, u + rs * du)
                 for dv, du in support.SHIFTS
                 if 0 <= v + rs * dv < h and 0 <= u + rs * du < w]

@@ -1168,13 +1168,12 @@ def _support_branch(z, cam, sigma, prof):
     model = (float(e_i), float(zref), half)
     big = min(MAX_RADIUS, round(BIG_FACTOR * prof.radius))
     if not halved:
-        ctx = _context(z, chosen, big, cam, growth=model[1:]) + (dev,)
+        ctx = (*_context(z, chosen, big, cam, growth=model[1:]), dev)
         unc = np.empty(z.shape, dtype=np.float32)
         run_rows(_support_rows, z.shape[0], z, chosen, model, ctx, unc, min_rows=16)
         return out, unc
     zd = np.ascontiguousarray(z[::2, ::2])
-    ctx = _context(zd, chosen, big // 2, (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy),
-                   growth=model[1:]) + (dev,)
+    ctx = (*_context(zd, chosen, big // 2, (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy), growth=model[1:]), dev)
     coarse = np.empty(zd.shape, dtype=np.float32)  # a cell of invalid depth reads e_i
     run_rows(_support_rows, zd.shape[0], zd, chosen, model, ctx, coarse, min_rows=8)
     unc = np.empty(z.shape, dtype=np.float32)

@@ -297,7 +297,7 @@ def _fallback(n, dev, zreal, vreal, cam):
                       for p, q in ((bx, fx_), (by, fy_), (bz, fz_)))
     use = flag & (best < inf)
     fb = _ray_facing(bx, by, bz, cam, use)
-    return tuple(torch.where(use, q, p) for p, q in zip(n[:3], fb[:3], strict=True)) + (n[3],)
+    return (*tuple(torch.where(use, q, p) for p, q in zip(n[:3], fb[:3], strict=True)), n[3])
 
 
 def _deviation(zs, a, b, c, du, dv, unit, fac, cam):
