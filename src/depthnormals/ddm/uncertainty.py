@@ -60,7 +60,10 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
   away, on both sides and in opposite directions, against the frame's own tail of that
   reading (:func:`_offsets_rows`, :func:`_offset_scales`, :data:`DEPTH_RAMP`, sessions
   14-15): a face narrower than the windows (a kerb's riser, a pole) takes the normal of the
-  face beside it, coherently, so no spread sees it, but its depth does;
+  face beside it, coherently, so no spread sees it, but its depth does; all of it read on the
+  branch's choice before its fallback to small windows (session 16,
+  :func:`depthnormals.ddm.support._fallback_rows`), the pixels that fell back at
+  :data:`FALLBACK_SCALE` times their map;
 - **clean depth** (the plane hypotheses): the float rounding of the one-pixel stencils
   (``sigma / sqrt(6)``) plus, where the pixel's normal agrees with none of its four neighbours'
   (a facet narrower than two pixels: no one-sided stencil fits), the least angle between them.
@@ -1173,7 +1176,8 @@ def _support_branch(z, cam, sigma, prof):
         run_rows(_support_rows, z.shape[0], z, chosen, model, ctx, unc, min_rows=16)
         return out, unc
     zd = np.ascontiguousarray(z[::2, ::2])
-    ctx = (*_context(zd, chosen, big // 2, (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy), growth=model[1:]), dev)
+    cam_half = (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy)
+    ctx = (*_context(zd, chosen, big // 2, cam_half, growth=model[1:]), dev)
     coarse = np.empty(zd.shape, dtype=np.float32)  # a cell of invalid depth reads e_i
     run_rows(_support_rows, zd.shape[0], zd, chosen, model, ctx, coarse, min_rows=8)
     unc = np.empty(z.shape, dtype=np.float32)
