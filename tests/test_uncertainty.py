@@ -512,6 +512,16 @@ def test_offsets_match_numpy_and_read_the_tilt(span):
     assert offsets(step, front)[5:-5].max() < 1e-6
 
 
+def _support_row(w):
+    """One row of ``w`` pixels for ``_support_rows``: depth 2 m, normals facing the camera but
+    the last (NaN), no jumps or steps."""
+    z = np.full((1, w), 2.0, np.float32)
+    n = np.zeros((1, w, 3), np.float32)
+    n[..., 2] = -1.0
+    n[0, w - 1] = np.nan
+    return z, n, np.zeros((2, 1, w), np.float32)
+
+
 def test_support_map_adds_the_depth_ramp():
     """The measured support's map, last: plus ``A t^2 min(m / DEPTH_FULL, 1)`` with ``t`` the
     ramp of the offsets over their frame scales (:data:`DEPTH_RAMP`), the lesser of the two
@@ -522,11 +532,7 @@ def test_support_map_adds_the_depth_ramp():
     a, r0, r1 = U.DEPTH_RAMP
     assert (a, r0, r1, U.DEPTH_FULL) == (55.0, 0.7, 2.5, 0.5)
     w = 8
-    z = np.full((1, w), 2.0, np.float32)
-    n = np.zeros((1, w, 3), np.float32)
-    n[..., 2] = -1.0
-    n[0, 7] = np.nan
-    sub = np.zeros((2, 1, w), np.float32)
+    z, n, sub = _support_row(w)
 
     def run(o3, o6, inv_q=(1.0, 1.0), model=(1.0, 2.0, 0), spreads=(2.0, 3.0)):
         out = np.empty((1, w), np.float32)
@@ -566,11 +572,7 @@ def test_support_map_reads_the_fallback():
 
     assert U.FALLBACK_SCALE == 0.8
     w = 8
-    z = np.full((1, w), 2.0, np.float32)
-    n = np.zeros((1, w, 3), np.float32)
-    n[..., 2] = -1.0
-    n[0, 7] = np.nan
-    sub = np.zeros((2, 1, w), np.float32)
+    z, n, sub = _support_row(w)
 
     def run(dev):
         out = np.empty((1, w), np.float32)

@@ -415,6 +415,24 @@ def _deviation_row(zrow, n3, gc, cr, rx, ry, fx, un, fac, best, out):
         out[u] = d if (zq == zq) & (best[u] < np.inf) else np.float32(0.0)
 
 
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _least_window(score, v, u, shift, k0, best):
+    """The least of ``best`` and the ``score`` of the windows ``SHIFTS[k0:]`` (centres
+    ``shift`` apart) around (v, u) inside the image, the first of equal ones winning: (score,
+    row, column), (v, u) where ``best`` stays."""
+    h, w = score.shape
+    bv = v
+    bu = u
+    for k in range(k0, SHIFTS.shape[0]):
+        r = v + shift * SHIFTS[k, 0]
+        c = u + shift * SHIFTS[k, 1]
+        if 0 <= r < h and 0 <= c < w and score[r, c] < best:
+            best = score[r, c]
+            bv = r
+            bu = c
+    return best, bv, bu
+
+
 @nb.njit(cache=True, error_model="numpy")
 def choose_pixel(z, fits, big, shift, gates, cam, v, u):
     """The readable reference of :func:`_choose_least_rows` at one pixel (same arguments):
@@ -424,7 +442,7 @@ def choose_pixel(z, fits, big, shift, gates, cam, v, u):
     big_n, big_s, big_c = big
     gate0, big_gate0, zref, half, unit0 = gates
     fx, fy, cx, cy = cam
-    h, w = z.shape
+    h = z.shape[0]
     nan = np.float32(np.nan)
     zq = z[v, u]
     if not (zq == zq):
@@ -433,15 +451,7 @@ def choose_pixel(z, fits, big, shift, gates, cam, v, u):
     best = score[v, u]
     if best <= np.float32(gate0) * fac:
         best = np.float32(-1.0)
-    bv = v
-    bu = u
-    for k in range(1, SHIFTS.shape[0]):  # the first of equal scores wins
-        r = v + shift * SHIFTS[k, 0]
-        c = u + shift * SHIFTS[k, 1]
-        if 0 <= r < h and 0 <= c < w and score[r, c] < best:
-            best = score[r, c]
-            bv = r
-            bu = c
+    best, bv, bu = _least_window(score, v, u, shift, 1, best)
     if not (best < np.inf):
         return nan, nan, nan, np.float32(0.0)
     if big_s.shape[0] == (h + 1) // 2 and big_s[v >> 1, u >> 1] <= np.float32(big_gate0) * fac:
@@ -587,22 +597,13 @@ def _fallback_rows(v0, v1, z, dev, limit, small, rs, cam, out):
     Few pixels deviate: a per-pixel loop."""
     fit_n, score = small
     fx, fy, cx, cy = cam
-    h, w = z.shape
+    w = z.shape[1]
     for v in range(v0, v1):
         ry = np.float32((v - cy) / fy)
         for u in range(w):
             if not (dev[v, u] > limit):
                 continue
-            best = np.float32(np.inf)
-            br = v
-            bc = u
-            for k in range(SHIFTS.shape[0]):
-                r = v + rs * SHIFTS[k, 0]
-                c = u + rs * SHIFTS[k, 1]
-                if 0 <= r < h and 0 <= c < w and score[r, c] < best:
-                    best = score[r, c]
-                    br = r
-                    bc = c
+            best, br, bc = _least_window(score, v, u, rs, 0, np.float32(np.inf))
             if best < np.inf:
                 _put_facing(out, v, u, fit_n[0, br, bc], fit_n[1, br, bc], fit_n[2, br, bc],
                             (np.float32((u - cx) / fx), ry), True)
