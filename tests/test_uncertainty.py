@@ -540,7 +540,7 @@ def test_support_map_adds_the_depth_ramp():
         s1 = np.full((1, w), spreads[0], np.float32)
         far = np.full((1, 1, w), spreads[1], np.float32)
         zero = np.zeros((1, w), np.float32)
-        U._support_rows(0, 1, z, n, model, (s1, far, sub, 0, offs, inv_q, zero), out)
+        U._support_rows(0, 1, z, n, model, (s1, far, sub, 0, offs, inv_q, zero, 5.0), out)
         return out[0]
 
     m = run([0.0] * w, [0.0] * w)
@@ -580,7 +580,7 @@ def test_support_map_reads_the_fallback():
         s1 = np.full((1, w), 2.0, np.float32)
         far = np.full((1, 1, w), 3.0, np.float32)
         U._support_rows(0, 1, z, n, (1.0, 2.0, 0), (s1, far, sub, 0, offs, (1.0, 1.0),
-                                                     np.float32([dev])), out)
+                                                     np.float32([dev]), DEVIATION), out)
         return out[0]
 
     m = run([0.0] * w)

@@ -485,13 +485,16 @@ def _support_rows(v0, v1, z, normals, model, ctx, out):
 
     ``model = (e_i, zref, half)``: the interior error ``e_i`` (degrees at ``zref``), growing
     with depth as the square root of the plane residual, ``(z / zref)^(half / 4)``. ``ctx =
-    (s1, far, sub, shift, offsets, inv_q)`` from :func:`_context` on this grid, ``inv_q`` the
-    inverse of :func:`_offset_scales` (0: no ramp). Per pixel the product of powers of
-    :data:`SUPPORT_MAP` and :data:`SUPPORT_POW` (module doc), at least :data:`LEVEL_FLOOR`
-    ``lev``, plus the ramp :data:`DEPTH_RAMP` of the offsets; NaN where the normal is NaN.
+    (s1, far, sub, shift, offsets, inv_q, dev, limit)``: :func:`_context` on this grid,
+    ``inv_q`` the inverse of :func:`_offset_scales` (0: no ramp), then the deviations of the
+    branch's choice and the limit past which it fell back (an argument, not the other
+    module's constant: a cached kernel would keep a changed constant of another module). Per
+    pixel the product of powers of :data:`SUPPORT_MAP` and :data:`SUPPORT_POW` (module doc),
+    at least :data:`LEVEL_FLOOR` ``lev``, plus the ramp :data:`DEPTH_RAMP` of the offsets,
+    times :data:`FALLBACK_SCALE` where the pixel fell back; NaN where the normal is NaN.
     Every loop runs along a row."""
     e_i, zref, half = model
-    s1, far, sub, sh, offs, inv_q, dev = ctx
+    s1, far, sub, sh, offs, inv_q, dev, limit = ctx
     w = z.shape[1]
     f32 = np.float32
     izref = f32(1.0 / zref if zref > 0.0 else 0.0)
@@ -514,7 +517,7 @@ def _support_rows(v0, v1, z, normals, model, ctx, out):
     lev = np.empty(w, dtype=f32)
     grow = np.empty(w, dtype=f32)
     fsc = f32(FALLBACK_SCALE)
-    dlim = f32(DEVIATION)
+    dlim = f32(limit)
     for v in range(v0, v1):
         _half_row(sub, v, sh, f2)
         zrow = z[v]
@@ -1171,13 +1174,13 @@ def _support_branch(z, cam, sigma, prof):
     model = (float(e_i), float(zref), half)
     big = min(MAX_RADIUS, round(BIG_FACTOR * prof.radius))
     if not halved:
-        ctx = (*_context(z, chosen, big, cam, growth=model[1:]), dev)
+        ctx = (*_context(z, chosen, big, cam, growth=model[1:]), dev, DEVIATION)
         unc = np.empty(z.shape, dtype=np.float32)
         run_rows(_support_rows, z.shape[0], z, chosen, model, ctx, unc, min_rows=16)
         return out, unc
     zd = np.ascontiguousarray(z[::2, ::2])
     cam_half = (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy)
-    ctx = (*_context(zd, chosen, big // 2, cam_half, growth=model[1:]), dev)
+    ctx = (*_context(zd, chosen, big // 2, cam_half, growth=model[1:]), dev, DEVIATION)
     coarse = np.empty(zd.shape, dtype=np.float32)  # a cell of invalid depth reads e_i
     run_rows(_support_rows, zd.shape[0], zd, chosen, model, ctx, coarse, min_rows=8)
     unc = np.empty(z.shape, dtype=np.float32)
