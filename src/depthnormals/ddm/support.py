@@ -42,7 +42,7 @@ deviations of the measured plane residual off the plane of the window it chose
 :data:`FALLBACK_RADIUS` that hold it instead (:func:`_fallback_rows`; noisier, but on its own
 face). On the synthetic kinect_v1 frames of the calibration benchmark the mean error drops
 12-20 %, on the realsense model 1-7 %, on the real frames' plane rims 10.51 -> 9.96 deg (mean
-over folders; interiors 3.83 -> 3.76); it costs about 1.5 ms at 640x480 (a radius-2 box-fit
+over folders; interiors 3.83 -> 3.76); it costs about 1.3 ms at 640x480 (a radius-2 box-fit
 pass and the deviation of every pixel).
 """
 
