@@ -330,3 +330,30 @@ def test_few_pixels_of_a_plane_deviate():
     assert ok.mean() > 0.9
     assert 0.4 < float(np.median(dev[ok])) < 1.0
     assert float(np.mean(dev[ok] > support.DEVIATION)) < 1e-3
+
+
+def test_no_fallback_below_its_radius():
+    """A choice of radius FALLBACK_RADIUS or less has no smaller window to fall back to: the
+    branch hands the map an infinite limit (no pixel fell back, whatever it deviates), and its
+    normals are the choice's; from radius 3 on the limit is DEVIATION."""
+    import dataclasses
+
+    from depthnormals.synth.noise import kinect_v1_noise
+
+    z, normals, K, _ = _table_edge((120, 160), f=145.0)
+    d = kinect_v1_noise(z, normals, K, rng=np.random.default_rng(1))
+    zp, cam = prepare(d, K, None)
+    p = noise_pass(zp, cam.fx, cam.fy)
+    base = support.support_profile(zp, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma)
+    for radius, limit in ((support.FALLBACK_RADIUS, np.inf), (3, support.DEVIATION)):
+        prof = dataclasses.replace(base, radius=radius)
+        scores: list = []
+        out = support.support_select(zp, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma, profile=prof,
+                                     out_scores=scores)
+        before, dev, got = scores[2], scores[3], scores[4]
+        assert got == limit
+        assert (dev > support.DEVIATION).any()  # deviating pixels either way
+        if limit == np.inf:
+            assert np.array_equal(out, before, equal_nan=True)
+        else:
+            assert not np.array_equal(out, before, equal_nan=True)

@@ -639,26 +639,27 @@ def choice_inputs(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
 
 
 def _choose(z: np.ndarray, zc: np.ndarray, args: tuple, out: np.ndarray, min_rows: int,
-            keep: list | None = None) -> np.ndarray:
+            keep: bool = False) -> tuple:
     """The window choice (:func:`_choose_least_rows`) of ``args`` (:func:`choice_inputs`) on
     the depth ``zc`` into ``out``, then the fallback of the pixels that deviate from their
-    window's plane (:func:`_fallback_rows`, on the depth ``z``, where the choice's radius
-    exceeds :data:`FALLBACK_RADIUS`): the deviations (H, W), 0 where ``z`` is invalid (``zc``
-    may fill it). ``keep``: a list that receives the normals of the choice before the
-    fallback (``out`` itself where none falls back)."""
+    window's plane (:func:`_fallback_rows`, on the depth ``z``) past :data:`DEVIATION` where
+    the choice's radius exceeds :data:`FALLBACK_RADIUS` (else none falls back). Returns the
+    deviations (H, W; 0 where ``z`` is invalid, which ``zc`` may fill), the limit past which
+    pixels fell back (inf: none can) and, with ``keep``, the normals of the choice before the
+    fallback (``out`` itself where none fell back; else None)."""
     dev = np.empty(z.shape, dtype=np.float32)
     run_rows(_choose_least_rows, z.shape[0], zc, *args, out, dev, min_rows=min_rows)
     if zc is not z:
         dev[np.isnan(z)] = 0.0
-    falls = args[2] > FALLBACK_RADIUS and bool((dev > DEVIATION).any())
-    if keep is not None:
-        keep.append(out.copy() if falls else out)
+    limit = DEVIATION if args[2] > FALLBACK_RADIUS else np.inf
+    falls = bool((dev > limit).any())
+    before = (out.copy() if falls else out) if keep else None
     if falls:
         cam = args[4]
         small = box_fit_windows(z, *cam, FALLBACK_RADIUS)
-        run_rows(_fallback_rows, z.shape[0], z, dev, np.float32(DEVIATION), small,
+        run_rows(_fallback_rows, z.shape[0], z, dev, np.float32(limit), small,
                  FALLBACK_RADIUS, cam, out, min_rows=min_rows)
-    return dev
+    return dev, limit, before
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -693,17 +694,18 @@ def support_select(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
     (:func:`_fallback_rows`). ``out_scores``: a list that receives, on the grid of the choice
     (every second row and column from :data:`HALF_RADIUS` on), the residual variances of the
     chosen radius's windows (footprints^2 of the profile), their shift, the normals chosen
-    before the fallback, the deviations and whether that grid is the half one, for the
-    uncertainty map (:mod:`depthnormals.ddm.uncertainty`); the normals do not change."""
+    before the fallback, the deviations, the limit past which pixels fell back (inf where the
+    radius allows none) and whether that grid is the half one, for the uncertainty map
+    (:mod:`depthnormals.ddm.uncertainty`); the normals do not change."""
     p = support_profile(z, fx, fy, cx, cy, sigma) if profile is None else profile
     h, w = z.shape
     out = np.empty((h, w, 3), dtype=np.float32)
-    keep: list | None = None if out_scores is None else []
+    keep = out_scores is not None
     if p.radius < HALF_RADIUS:
         args = choice_inputs(z, fx, fy, cx, cy, p)
-        dev = _choose(z, z, args, out, 16, keep)
-        if out_scores is not None:
-            out_scores.extend((args[0][1], args[2], keep[0], dev, False))
+        dev, limit, before = _choose(z, z, args, out, 16, keep)
+        if keep:
+            out_scores.extend((args[0][1], args[2], before, dev, limit, False))
         return out
     zd = np.ascontiguousarray(z[::2, ::2])
     cam = (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy)
@@ -711,9 +713,9 @@ def support_select(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
     # the choice reads depth only for the gates' growth and for validity: every cell chooses
     zfill = np.where(np.isnan(zd), zd.dtype.type(p.depth if p.depth == p.depth else 1.0), zd)
     half = np.empty((zd.shape[0], zd.shape[1], 3), dtype=np.float32)
-    dev = _choose(zd, zfill, args, half, 8, keep)
-    if out_scores is not None:
-        out_scores.extend((args[0][1], args[2], keep[0], dev, True))
+    dev, limit, before = _choose(zd, zfill, args, half, 8, keep)
+    if keep:
+        out_scores.extend((args[0][1], args[2], before, dev, limit, True))
     run_rows(_upsample_rows, h, z, half, (float(fx), float(fy), float(cx), float(cy)), out,
              min_rows=16)
     return out

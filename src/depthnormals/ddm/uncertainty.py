@@ -100,7 +100,6 @@ from .boxfit import box_fit_from_prepared, box_fit_windows
 from .noise import TILE, noise_pass
 from .support import (
     BIG_FACTOR,
-    DEVIATION,
     EXCESS_FLOOR,
     MAX_RADIUS,
     PAIR_TO_ERROR,
@@ -193,15 +192,16 @@ DEPTH_RAMP = (55.0, 0.7, 2.5)
 DEPTH_SPANS = (3, 6)
 DEPTH_QUANTILE = 90.0
 DEPTH_FULL = 0.5
-#: Where the branch fell back to small windows (a depth more than :data:`DEVIATION` standard
-#: deviations off the chosen window's plane, :func:`depthnormals.ddm.support._fallback_rows`)
-#: the map reads the choice before the fallback, whose wrong face it saw, times this: the
-#: small windows err less than the wrong face did (on the calibration frames those pixels
-#: read 0.67-0.92x their map on Kinect-like depth and on the real frames, 0.8-1.15x on the
-#: realsense model). A ramp on the largest deviation within two cells (the narrow face's
-#: pixels by the crease deviate less) raised kinect_v1's held-out seed 1 from 7 to 9 bins of
-#: 10 but the real frames' pixels there already read above their error (15.7 deg observed,
-#: 19.8 predicted) and lost rank (the held-out TUM frame 0.553 -> 0.544): left out.
+#: Where the branch fell back to small windows (a depth more than
+#: :data:`~depthnormals.ddm.support.DEVIATION` standard deviations off the chosen window's
+#: plane, :func:`depthnormals.ddm.support._fallback_rows`) the map reads the choice before
+#: the fallback, whose wrong face it saw, times this: the small windows err less than the
+#: wrong face did (on the calibration frames those pixels read 0.67-0.92x their map on
+#: Kinect-like depth and on the real frames, 0.8-1.15x on the realsense model). A ramp on
+#: the largest deviation within two cells (the narrow face's pixels by the crease deviate
+#: less) raised kinect_v1's held-out seed 1 from 7 to 9 bins of 10 but the real frames'
+#: pixels there already read above their error (15.7 deg observed, 19.8 predicted) and lost
+#: rank (the held-out TUM frame 0.553 -> 0.544): left out.
 FALLBACK_SCALE = 0.8
 #: The near spread ``s_N`` of both noisy maps: cells of the map's grid (the box-fit's is
 #: the pixel grid; the measured support's is mostly the half grid, 6 pixels).
@@ -487,8 +487,9 @@ def _support_rows(v0, v1, z, normals, model, ctx, out):
     with depth as the square root of the plane residual, ``(z / zref)^(half / 4)``. ``ctx =
     (s1, far, sub, shift, offsets, inv_q, dev, limit)``: :func:`_context` on this grid,
     ``inv_q`` the inverse of :func:`_offset_scales` (0: no ramp), then the deviations of the
-    branch's choice and the limit past which it fell back (an argument, not the other
-    module's constant: a cached kernel would keep a changed constant of another module). Per
+    branch's choice and the limit past which it fell back (as the branch decided it, inf
+    where its radius allows no fallback; an argument: a cached kernel would keep a changed
+    constant of another module). Per
     pixel the product of powers of :data:`SUPPORT_MAP` and :data:`SUPPORT_POW` (module doc),
     at least :data:`LEVEL_FLOOR` ``lev``, plus the ramp :data:`DEPTH_RAMP` of the offsets,
     times :data:`FALLBACK_SCALE` where the pixel fell back; NaN where the normal is NaN.
@@ -1166,21 +1167,22 @@ def _support_branch(z, cam, sigma, prof):
     scores: list = []
     out = support_select(z, fx, fy, cx, cy, sigma, profile=prof, out_scores=scores)
     # the spreads and offsets read the choice before the fallback: a pixel whose window was
-    # right reads as it did; the fallen back ones get their own level (_support_rows)
-    score, _, chosen, dev, halved = scores
+    # right reads as it did; the ones that fell back (deviation past ``limit``, as the branch
+    # decided it) read FALLBACK_SCALE times their map (_support_rows)
+    score, _, chosen, dev, limit, halved = scores
     e_i = _interior_error(out, z, score, prof)
     zref = prof.depth if prof.depth == prof.depth else 1.0
     half = round(2.0 * prof.exponent) if prof.depth == prof.depth else 0
     model = (float(e_i), float(zref), half)
     big = min(MAX_RADIUS, round(BIG_FACTOR * prof.radius))
     if not halved:
-        ctx = (*_context(z, chosen, big, cam, growth=model[1:]), dev, DEVIATION)
+        ctx = (*_context(z, chosen, big, cam, growth=model[1:]), dev, limit)
         unc = np.empty(z.shape, dtype=np.float32)
         run_rows(_support_rows, z.shape[0], z, chosen, model, ctx, unc, min_rows=16)
         return out, unc
     zd = np.ascontiguousarray(z[::2, ::2])
     cam_half = (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy)
-    ctx = (*_context(zd, chosen, big // 2, cam_half, growth=model[1:]), dev, DEVIATION)
+    ctx = (*_context(zd, chosen, big // 2, cam_half, growth=model[1:]), dev, limit)
     coarse = np.empty(zd.shape, dtype=np.float32)  # a cell of invalid depth reads e_i
     run_rows(_support_rows, zd.shape[0], zd, chosen, model, ctx, coarse, min_rows=8)
     unc = np.empty(z.shape, dtype=np.float32)
