@@ -201,7 +201,10 @@ DEPTH_FULL = 0.5
 #: the largest deviation within two cells (the narrow face's pixels by the crease deviate
 #: less) raised kinect_v1's held-out seed 1 from 7 to 9 bins of 10 but the real frames'
 #: pixels there already read above their error (15.7 deg observed, 19.8 predicted) and lost
-#: rank (the held-out TUM frame 0.553 -> 0.544): left out.
+#: rank (the held-out TUM frame 0.553 -> 0.544): left out. So was (session 17) a posterior that
+#: a pixel near one that fell back lies on that face (its depth against that pixel's plane and
+#: its own, the map mixed with the angle between the normals): kinect_v1 9/9/10/10/9 bins over
+#: seeds 0-4 (was 9/7/10/9/8), the real folders 42 of 60 (was 49), the map past 1.3x.
 FALLBACK_SCALE = 0.8
 #: The near spread ``s_N`` of both noisy maps: cells of the map's grid (the box-fit's is
 #: the pixel grid; the measured support's is mostly the half grid, 6 pixels).
