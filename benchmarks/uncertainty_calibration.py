@@ -295,6 +295,9 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--real {a.real}: no such folder (pass --real '' to leave the real frames out)")
     if a.synth is not None and not a.synth.is_dir():
         ap.error(f"--synth {a.synth}: no such folder")
+    if a.min_fraction is not None and not 1e-6 <= a.min_fraction <= 1.0:  # before any column
+        ap.error(f"--min-fraction {a.min_fraction}: must be in [1e-06, 1] (plane_reference's "
+                 "min_fraction, a share of the image)")
     if a.speed:
         speed(a.method, a.synth, a.real)
         return 0

@@ -770,3 +770,15 @@ def test_calibration_bench_reads_smaller_planes_on_request(shared_data, load_ben
           for mf in (None, 0.0025)}
     assert abs(px[None] - 124647) <= 100
     assert px[0.0025] > 1.05 * px[None]
+
+
+@pytest.mark.parametrize("value", ["0", "-0.01", "1.5", "nan"])
+def test_calibration_bench_refuses_a_bad_min_fraction(tmp_path, monkeypatch, load_benchmark,
+                                                     capsys, value):
+    """A ``--min-fraction`` outside [1e-06, 1] is an error before any column is computed."""
+    monkeypatch.chdir(tmp_path)
+    bench = load_benchmark("uncertainty_calibration")
+    with pytest.raises(SystemExit) as exc:
+        bench.main(["--real", "", "--min-fraction", value])
+    assert exc.value.code == 2
+    assert f"--min-fraction {float(value)}: must be in" in capsys.readouterr().err
