@@ -298,8 +298,8 @@ def _fit_rows(v0, v1, z, fx, fy, cx, cy, r, out_n, out_score, out_plane, want_pl
     t2m0 = np.zeros(w)
     acol = np.arange(w) - cx
     pl = out_plane if want_plane else np.empty((3, 1, w), dtype=np.float32)  # scratch
-    ab = np.empty((2, w), dtype=np.float32)  # the slopes where only the centres are wanted
     only_c = want_plane and out_plane.shape[0] == 1
+    ab = np.empty((2, w if only_c else 1), dtype=np.float32)  # the slopes: only centres wanted
     nn = out_n if want_n else np.empty((3, 1, w), dtype=np.float32)
     rf = np.float64(r)
     r1 = rf + 1.0

@@ -1178,18 +1178,19 @@ def _support_branch(z, cam, sigma, prof):
     half = round(2.0 * prof.exponent) if prof.depth == prof.depth else 0
     model = (float(e_i), float(zref), half)
     big = min(MAX_RADIUS, round(BIG_FACTOR * prof.radius))
+    # the map on the grid of the choice: the pixels, or every second row and column
+    if halved:
+        zg = np.ascontiguousarray(z[::2, ::2])
+        cam_g, big_g, rows = (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy), big // 2, 8
+    else:
+        zg, cam_g, big_g, rows = z, cam, big, 16
+    ctx = (*_context(zg, chosen, big_g, cam_g, growth=model[1:]), dev, limit)
+    grid = np.empty(zg.shape, dtype=np.float32)  # (a half-grid cell of invalid depth: e_i)
+    run_rows(_support_rows, zg.shape[0], zg, chosen, model, ctx, grid, min_rows=rows)
     if not halved:
-        ctx = (*_context(z, chosen, big, cam, growth=model[1:]), dev, limit)
-        unc = np.empty(z.shape, dtype=np.float32)
-        run_rows(_support_rows, z.shape[0], z, chosen, model, ctx, unc, min_rows=16)
-        return out, unc
-    zd = np.ascontiguousarray(z[::2, ::2])
-    cam_half = (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy)
-    ctx = (*_context(zd, chosen, big // 2, cam_half, growth=model[1:]), dev, limit)
-    coarse = np.empty(zd.shape, dtype=np.float32)  # a cell of invalid depth reads e_i
-    run_rows(_support_rows, zd.shape[0], zd, chosen, model, ctx, coarse, min_rows=8)
+        return out, grid
     unc = np.empty(z.shape, dtype=np.float32)
-    run_rows(_upsample_rows, z.shape[0], coarse, z, unc, min_rows=16)
+    run_rows(_upsample_rows, z.shape[0], grid, z, unc, min_rows=16)
     return out, unc
 
 
