@@ -215,7 +215,8 @@ def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
         Unit normals in the OpenCV camera frame facing the camera (``dot(n, X) < 0``),
         NaN where no estimate is possible.
     uncertainty : ndarray, shape (H, W) or (N, H, W), float32
-        Only with ``return_uncertainty=True``: the expected angular error in degrees.
+        Only with ``return_uncertainty=True``: the expected angular error in degrees, at most
+        90 (the error of a normal that carries no information).
 
     Warns
     -----
