@@ -29,7 +29,12 @@ Columns:
 
     python benchmarks/uncertainty_calibration.py [--method 3f2n+] [--synth /tmp/u-synth]
         [--real ../shared/data/real-sensors] [--planes] [--min-fraction F] [--json OUT]
-        [--figure PNG] [--speed]
+        [--figure PNG] [--bootstrap N] [--speed]
+
+``--bootstrap N``: each column's frames resampled N times with replacement; per decile bin the
+5-95 % range of observed / predicted and the share of resamples in which it passes, and the
+share in which every bin passes (how far a column of a few frames reads its objects rather
+than the map).
 
 ``--speed``: instead, the single-thread time of ``method`` with and without the map on every
 real frame and one frame per synthetic variant (median of 7, interleaved per frame), and the
@@ -100,6 +105,49 @@ def reliability(pred: np.ndarray, obs: np.ndarray, bins: int = BINS) -> list[dic
     return out
 
 
+def bootstrap_bins(pred: list[np.ndarray], obs: list[np.ndarray], reps: int, seed: int,
+                   bins: int = BINS) -> dict:
+    """The decile table's spread over the frames: ``reps`` resamples of the frames (with
+    replacement, as many as there are), each binned as :func:`reliability` bins (edges at the
+    resample's rank quantiles); per bin the 5th and 95th percentiles of observed / predicted
+    and the share of resamples it passes in, and the share in which every bin passes. A
+    column of a few frames is binned over a few objects: one narrow face or shelf moves a
+    decile by half (docs/benchmarks.md section 17)."""
+    order = [np.argsort(p, kind="stable") for p in pred]
+    ps = [p[o] for p, o in zip(pred, order, strict=True)]
+    cp = [np.concatenate(([0.0], np.cumsum(p))) for p in ps]
+    co = [np.concatenate(([0.0], np.cumsum(o[k]))) for o, k in zip(obs, order, strict=True)]
+    rng = np.random.default_rng(seed)
+    ratios = np.full((reps, bins), np.nan)
+    passed = np.zeros((reps, bins), dtype=bool)
+    for i in range(reps):
+        pick = rng.integers(0, len(pred), len(pred))
+        allp = np.concatenate([ps[j] for j in pick])
+        n = allp.size
+        if n < bins:
+            continue
+        ranks = [n * k // bins for k in range(1, bins)]
+        edges = np.partition(allp, ranks)[ranks]
+        sp = np.zeros(bins)
+        so = np.zeros(bins)
+        cnt = np.zeros(bins)
+        for j in pick:
+            cut = np.concatenate(([0], np.searchsorted(ps[j], edges, side="left"), [ps[j].size]))
+            sp += np.diff(cp[j][cut])
+            so += np.diff(co[j][cut])
+            cnt += np.diff(cut)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mp, mo = sp / cnt, so / cnt
+        ok = (np.abs(mo - mp) <= REL_TOL * mp) | ((mp < ABS_BELOW) & (mo < ABS_BELOW)
+                                                   & (np.abs(mo - mp) <= ABS_TOL))
+        ratios[i] = mo / mp
+        passed[i] = ok & (cnt > 0)
+    return {"reps": reps, "ratio_p5": np.nanpercentile(ratios, 5, axis=0).tolist(),
+            "ratio_p95": np.nanpercentile(ratios, 95, axis=0).tolist(),
+            "bin_pass_share": passed.mean(axis=0).tolist(),
+            "all_pass_share": float(passed.all(axis=1).mean())}
+
+
 class Column:
     """The (prediction, observation) pairs of one column."""
 
@@ -114,14 +162,17 @@ class Column:
         self.pred.append(unc[ok].astype(np.float64))
         self.obs.append(err[ok].astype(np.float64))
 
-    def summary(self) -> dict:
+    def summary(self, bootstrap: int = 0, seed: int = 0) -> dict:
         p = np.concatenate(self.pred) if self.pred else np.empty(0)
         o = np.concatenate(self.obs) if self.obs else np.empty(0)
         table = reliability(p, o) if p.size >= BINS else []
-        return {"pixels": int(p.size), "spearman": spearman(p, o),
-                "mean_predicted": float(p.mean()) if p.size else float("nan"),
-                "mean_observed": float(o.mean()) if o.size else float("nan"),
-                "bins_passed": sum(b["pass"] for b in table), "bins": table}
+        out = {"pixels": int(p.size), "frames": len(self.pred), "spearman": spearman(p, o),
+               "mean_predicted": float(p.mean()) if p.size else float("nan"),
+               "mean_observed": float(o.mean()) if o.size else float("nan"),
+               "bins_passed": sum(b["pass"] for b in table), "bins": table}
+        if bootstrap and table and len(self.pred) > 1:
+            out["bootstrap"] = bootstrap_bins(self.pred, self.obs, bootstrap, seed)
+        return out
 
 
 def analytic_columns(method: str, noise: float, seed: int) -> dict[str, Column]:
@@ -235,11 +286,17 @@ def _print(name: str, s: dict) -> None:
     print(f"\n{name}: {s['pixels']} px, Spearman {s['spearman']:.3f}, mean predicted "
           f"{s['mean_predicted']:.3f} deg, observed {s['mean_observed']:.3f} deg, "
           f"bins passed {s['bins_passed']}/{len(s['bins'])}")
-    print("  bin  predicted  observed  ratio  pass")
+    bs = s.get("bootstrap")
+    print("  bin  predicted  observed  ratio  pass" + (
+        f"  ratio 5-95 % ({bs['reps']} resamples of {s['frames']} frames), passes" if bs else ""))
     for i, b in enumerate(s["bins"]):
         ratio = b["observed"] / b["predicted"] if b["predicted"] > 0 else float("nan")
+        more = (f"  {bs['ratio_p5'][i]:5.2f}-{bs['ratio_p95'][i]:5.2f}  "
+                f"{100 * bs['bin_pass_share'][i]:3.0f} %" if bs else "")
         print(f"  {i + 1:3d}  {b['predicted']:9.3f}  {b['observed']:8.3f}  {ratio:5.2f}  "
-              f"{'yes' if b['pass'] else 'NO'}")
+              f"{'yes' if b['pass'] else 'NO ':3s}{more}")
+    if bs:
+        print(f"  every bin passes in {100 * bs['all_pass_share']:.0f} % of the resamples")
 
 
 def _figure(results: dict, path: Path) -> None:
@@ -290,6 +347,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--min-fraction", type=float, default=None,
                     help="the real plane references' smallest plane, a share of the image "
                          "(plane_reference's default 0.01; smaller: faces the default leaves out)")
+    ap.add_argument("--bootstrap", type=int, default=0, metavar="N",
+                    help="also resample each column's frames N times (with replacement): the "
+                         "decile ratios' 5-95 %% range and how often each bin passes")
     a = ap.parse_args(argv)
     if a.real and not Path(a.real).is_dir():  # never a silently shorter table
         ap.error(f"--real {a.real}: no such folder (pass --real '' to leave the real frames out)")
@@ -298,6 +358,8 @@ def main(argv: list[str] | None = None) -> int:
     if a.min_fraction is not None and not 1e-6 <= a.min_fraction <= 1.0:  # before any column
         ap.error(f"--min-fraction {a.min_fraction}: must be in [1e-06, 1] (plane_reference's "
                  "min_fraction, a share of the image)")
+    if not 0 <= a.bootstrap <= 100_000:
+        ap.error(f"--bootstrap {a.bootstrap}: must be in [0, 100000] (0: no resampling)")
     if a.speed:
         speed(a.method, a.synth, a.real)
         return 0
@@ -307,7 +369,7 @@ def main(argv: list[str] | None = None) -> int:
         cols = dict(sorted(cols.items(), key=lambda kv: _order(kv[0])))
     if a.real:
         cols.update(real_columns(Path(a.real), a.method, a.seed, a.min_fraction))
-    results = {k: c.summary() for k, c in cols.items()}
+    results = {k: c.summary(a.bootstrap, a.seed) for k, c in cols.items()}
     for k, s in results.items():
         _print(k, s)
     print("\nsummary: column, Spearman, bins passed, target (every bin; Spearman)")

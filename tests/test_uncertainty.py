@@ -805,3 +805,24 @@ def test_calibration_bench_refuses_a_bad_min_fraction(tmp_path, monkeypatch, loa
         bench.main(["--real", "", "--min-fraction", value])
     assert exc.value.code == 2
     assert f"--min-fraction {float(value)}: must be in" in capsys.readouterr().err
+
+
+def test_calibration_bench_bootstrap_bins_as_the_table(load_benchmark):
+    """``--bootstrap``: frames resampled with replacement, each resample binned like the
+    table. Two identical frames give every resample the table's own ratios (so the binning is
+    the table's); a frame calibrated beside one observing 3x its prediction spreads the ratios
+    (1 to 3) and passes only in the resamples drawing the calibrated frame twice (1/4)."""
+    bench = load_benchmark("uncertainty_calibration")
+    rng = np.random.default_rng(1)
+    p = rng.gamma(1.5, 2.0, 5000)
+    o = p * rng.uniform(0.8, 1.25, p.size)
+    table = bench.reliability(np.concatenate([p, p]), np.concatenate([o, o]))
+    want = [b["observed"] / b["predicted"] for b in table]
+    bs = bench.bootstrap_bins([p, p], [o, o], 50, seed=0)
+    np.testing.assert_allclose(bs["ratio_p5"], want, rtol=2e-3)
+    np.testing.assert_allclose(bs["ratio_p95"], want, rtol=2e-3)
+    assert bs["bin_pass_share"] == [1.0] * 10 and bs["all_pass_share"] == 1.0
+    bs = bench.bootstrap_bins([p, p], [p, 3.0 * p], 400, seed=0)
+    assert min(bs["ratio_p5"]) >= 0.999 and max(bs["ratio_p95"]) <= 3.001
+    assert max(bs["ratio_p95"]) > 2.9 and min(bs["ratio_p5"]) < 1.01
+    assert 0.17 <= bs["all_pass_share"] <= 0.33, bs["all_pass_share"]
