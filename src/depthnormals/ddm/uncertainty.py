@@ -504,7 +504,8 @@ def _support_rows(v0, v1, z, normals, model, ctx, out):
     constant of another module). Per
     pixel the product of powers of :data:`SUPPORT_MAP` and :data:`SUPPORT_POW` (module doc),
     at least :data:`LEVEL_FLOOR` ``lev``, plus the ramp :data:`DEPTH_RAMP` of the offsets,
-    times :data:`FALLBACK_SCALE` where the pixel fell back; NaN where the normal is NaN.
+    times :data:`FALLBACK_SCALE` where the pixel fell back, at most :data:`MAX_ERROR`; NaN where
+    the normal is NaN.
     Every loop runs along a row."""
     e_i, zref, half = model
     s1, far, sub, sh, offs, inv_q, dev, limit = ctx
@@ -531,6 +532,7 @@ def _support_rows(v0, v1, z, normals, model, ctx, out):
     grow = np.empty(w, dtype=f32)
     fsc = f32(FALLBACK_SCALE)
     dlim = f32(limit)
+    cap = f32(MAX_ERROR)
     for v in range(v0, v1):
         _half_row(sub, v, sh, f2)
         zrow = z[v]
@@ -568,7 +570,8 @@ def _support_rows(v0, v1, z, normals, model, ctx, out):
             lev[u] = m * fsc if dv_row[u] > dlim else m
         for u in range(w):
             nx = normals[v, u, 0]
-            out[v, u] = lev[u] if nx == nx else nan
+            m = cap if lev[u] > cap else lev[u]
+            out[v, u] = m if nx == nx else nan
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -594,8 +597,9 @@ def _box_product(er, s1r, s3r, jr, sr, out):
 def _box_final_rows(v0, v1, e0, e_high, out):
     """Rows ``[v0, v1)`` of the box-fit branch's map ``out``, last: times ``BOX_HIGH[1]``
     where the noise error ``e0`` exceeds ``e_high`` (:data:`BOX_HIGH`: the large window
-    refused), then the ramp :data:`BOX_RAMP`."""
+    refused), then the ramp :data:`BOX_RAMP`, at most :data:`MAX_ERROR` (NaN stays NaN)."""
     f32 = np.float32
+    cap = f32(MAX_ERROR)
     hi = f32(e_high)
     f = f32(BOX_HIGH[1])
     a = f32(BOX_RAMP[0])
@@ -609,7 +613,8 @@ def _box_final_rows(v0, v1, e0, e_high, out):
             t = (m - m0) * inv
             t = t if t > f32(0.0) else f32(0.0)
             t = t if t < f32(1.0) else f32(1.0)
-            o[u] = m * (f32(1.0) + a * t)
+            m = m * (f32(1.0) + a * t)
+            o[u] = cap if m > cap else m
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -1234,7 +1239,7 @@ def _clean_branch(z, cam, sigma):
     unc = np.empty(z.shape, dtype=np.float32)
     planar = np.ascontiguousarray(out.transpose(2, 0, 1))
     run_rows(_spread_rows, z.shape[0], planar, float(base), unc, min_rows=16)
-    return out, unc
+    return out, np.minimum(unc, np.float32(MAX_ERROR), out=unc)
 
 
 def _pair_excess(normals, m, score) -> float:
@@ -1310,11 +1315,13 @@ def _plain(z, cam, normals, r: int):
     tiles = _tile_maps(z, fx, fy, sigma, r, p.tiles(), 1e-6)
     m = _fit_error(z, normals, score, 0, tiles, (1.0, 0, 1.0, True), None, cam)
     if sigma < NOISE_CLEAN:  # clean depth: the pairs' angles are the scene's, not noise
-        return m
+        return np.minimum(m, np.float32(MAX_ERROR))
     s = _far_spread(normals, 2 * r + 1)
     s = np.where(np.isfinite(s), s, m)  # no neighbour one window away: the closed form
     c = _pair_excess(normals, s, score)
-    return np.minimum(s * np.float32(c), np.maximum(s, np.float32(PLAIN_CAP))) if c > 1.0 else s
+    if c > 1.0:
+        s = np.minimum(s * np.float32(c), np.maximum(s, np.float32(PLAIN_CAP)))
+    return np.minimum(s, np.float32(MAX_ERROR))
 
 
 def normals_with_uncertainty(compute, depth: Any, K: Any, *, method: str,
@@ -1328,19 +1335,15 @@ def normals_with_uncertainty(compute, depth: Any, K: Any, *, method: str,
         raise ValueError(f"return_uncertainty=True is supported for methods "
                          f"{', '.join(UNCERTAINTY_METHODS)}; got method {method!r}")
     if method == "3f2n+":
-        normals, unc = _plus(depth, K, depth_scale, options)
+        return _plus(depth, K, depth_scale, options)
+    normals = compute(depth, K, method=method, depth_scale=depth_scale, **options)
+    z, cam = prepare(depth, K, depth_scale)
+    c = (float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy))
+    if method == "fals":
+        r = int(options.get("window", 5)) // 2
     else:
-        normals = compute(depth, K, method=method, depth_scale=depth_scale, **options)
-        z, cam = prepare(depth, K, depth_scale)
-        c = (float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy))
-        if method == "fals":
-            r = int(options.get("window", 5)) // 2
-        else:
-            r = max(1, int(float(options.get("normal_smoothing_size", 10.0))) // 2)
-        unc = _plain(z, c, normals, r)
-    # at most MAX_ERROR (NaN stays NaN); the branches return arrays of their own
-    np.minimum(unc, np.float32(MAX_ERROR), out=unc)
-    return normals, unc
+        r = max(1, int(float(options.get("normal_smoothing_size", 10.0))) // 2)
+    return normals, _plain(z, c, normals, r)
 
 
 def _plus(depth, K, depth_scale, options):
