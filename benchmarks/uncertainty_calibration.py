@@ -92,6 +92,13 @@ def spearman(a: np.ndarray, b: np.ndarray) -> float:
     return float((ra * rb).sum() / den) if den > 0 else float("nan")
 
 
+def passes(pred, obs):
+    """Whether a bin of mean prediction ``pred`` and mean observation ``obs`` passes (module
+    doc); scalars or arrays of bins alike."""
+    diff = np.abs(np.asarray(obs) - pred)
+    return (diff <= REL_TOL * pred) | ((pred < ABS_BELOW) & (obs < ABS_BELOW) & (diff <= ABS_TOL))
+
+
 def reliability(pred: np.ndarray, obs: np.ndarray, bins: int = BINS) -> list[dict]:
     """Pixels binned by deciles of ``pred``: per bin its mean prediction and observation."""
     order = np.argsort(pred, kind="stable")
@@ -100,8 +107,8 @@ def reliability(pred: np.ndarray, obs: np.ndarray, bins: int = BINS) -> list[dic
         if part.size == 0:
             continue
         p, o = float(pred[part].mean()), float(obs[part].mean())
-        ok = abs(o - p) <= REL_TOL * p or (p < ABS_BELOW and o < ABS_BELOW and abs(o - p) <= ABS_TOL)
-        out.append({"n": int(part.size), "predicted": p, "observed": o, "pass": bool(ok)})
+        out.append({"n": int(part.size), "predicted": p, "observed": o,
+                    "pass": bool(passes(p, o))})
     return out
 
 
@@ -138,10 +145,8 @@ def bootstrap_bins(pred: list[np.ndarray], obs: list[np.ndarray], reps: int, see
             cnt += np.diff(cut)
         with np.errstate(invalid="ignore", divide="ignore"):
             mp, mo = sp / cnt, so / cnt
-        ok = (np.abs(mo - mp) <= REL_TOL * mp) | ((mp < ABS_BELOW) & (mo < ABS_BELOW)
-                                                   & (np.abs(mo - mp) <= ABS_TOL))
         ratios[i] = mo / mp
-        passed[i] = ok & (cnt > 0)
+        passed[i] = passes(mp, mo) & (cnt > 0)
     return {"reps": reps, "ratio_p5": np.nanpercentile(ratios, 5, axis=0).tolist(),
             "ratio_p95": np.nanpercentile(ratios, 95, axis=0).tolist(),
             "bin_pass_share": passed.mean(axis=0).tolist(),

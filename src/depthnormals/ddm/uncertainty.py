@@ -1315,12 +1315,13 @@ def _plain(z, cam, normals, r: int):
     tiles = _tile_maps(z, fx, fy, sigma, r, p.tiles(), 1e-6)
     m = _fit_error(z, normals, score, 0, tiles, (1.0, 0, 1.0, True), None, cam)
     if sigma < NOISE_CLEAN:  # clean depth: the pairs' angles are the scene's, not noise
-        return np.minimum(m, np.float32(MAX_ERROR))
-    s = _far_spread(normals, 2 * r + 1)
-    s = np.where(np.isfinite(s), s, m)  # no neighbour one window away: the closed form
-    c = _pair_excess(normals, s, score)
-    if c > 1.0:
-        s = np.minimum(s * np.float32(c), np.maximum(s, np.float32(PLAIN_CAP)))
+        s = m
+    else:
+        s = _far_spread(normals, 2 * r + 1)
+        s = np.where(np.isfinite(s), s, m)  # no neighbour one window away: the closed form
+        c = _pair_excess(normals, s, score)
+        if c > 1.0:
+            s = np.minimum(s * np.float32(c), np.maximum(s, np.float32(PLAIN_CAP)))
     return np.minimum(s, np.float32(MAX_ERROR))
 
 
