@@ -25,10 +25,16 @@ Columns:
 - with ``--min-fraction F``, the real references keep planes down to ``F`` of the image
   (``plane_reference``'s ``min_fraction``, default 0.01): 0.0025 adds faces such as a table's
   front or a box's side, which the default leaves out (a diagnosis: the targets are read on
-  the default references).
+  the default references);
+- with ``--creases``, ``real+creases/<folder>`` and ``real+creases``: the same pixels and the
+  bands by the planes' creases (:func:`depthnormals.evaluate.crease_band`: within 10 px of the
+  line where two reference planes over 30 deg apart meet, each pixel against the face it sees
+  by geometry), which the plane references leave out and where a crease placed a few pixels
+  off errs by the whole angle between the faces (a diagnosis: the targets are read on the
+  plane references).
 
     python benchmarks/uncertainty_calibration.py [--method 3f2n+] [--synth /tmp/u-synth]
-        [--real ../shared/data/real-sensors] [--planes] [--min-fraction F] [--json OUT]
+        [--real ../shared/data/real-sensors] [--planes] [--min-fraction F] [--creases] [--json OUT]
         [--figure PNG] [--bootstrap N] [--speed]
 
 ``--bootstrap N``: each column's frames resampled N times with replacement; per decile bin the
@@ -216,12 +222,14 @@ def synth_columns(root: Path, method: str, planes: bool = False,
     return cols
 
 
-def real_columns(root: Path, method: str, seed: int,
-                 min_fraction: float | None = None) -> dict[str, Column]:
+def real_columns(root: Path, method: str, seed: int, min_fraction: float | None = None,
+                 creases: bool = False) -> dict[str, Column]:
     from depthnormals.datasets import open as open_dataset
-    from depthnormals.evaluate import plane_reference, sensor_threshold
+    from depthnormals.evaluate import crease_band, plane_reference, sensor_threshold
 
     cols: dict[str, Column] = {"real": Column()}
+    if creases:
+        cols["real+creases"] = Column()
     more = {} if min_fraction is None else {"min_fraction": min_fraction}
     for f in open_dataset(root):
         ref = plane_reference(f.depth, f.K, seed=seed, threshold=sensor_threshold(f.meta),
@@ -236,6 +244,13 @@ def real_columns(root: Path, method: str, seed: int,
         group = str(f.group).split("/")[0]
         cols.setdefault(f"real/{group}", Column()).add(u, err, mask)
         cols["real"].add(u, err, mask)
+        if creases:
+            band = crease_band(f.depth, f.K, ref)
+            g[band.mask] = band.normals[band.mask]
+            err = dn.angular_error(n, g.astype(np.float32))
+            mask = mask | band.mask
+            cols.setdefault(f"real+creases/{group}", Column()).add(u, err, mask)
+            cols["real+creases"].add(u, err, mask)
     return cols
 
 
@@ -352,6 +367,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--min-fraction", type=float, default=None,
                     help="the real plane references' smallest plane, a share of the image "
                          "(plane_reference's default 0.01; smaller: faces the default leaves out)")
+    ap.add_argument("--creases", action="store_true",
+                    help="also score the real frames with the bands by their planes' creases "
+                         "(crease_band: the face each pixel sees, by geometry)")
     ap.add_argument("--bootstrap", type=int, default=0, metavar="N",
                     help="also resample each column's frames N times (with replacement): the "
                          "decile ratios' 5-95 %% range and how often each bin passes")
@@ -373,7 +391,7 @@ def main(argv: list[str] | None = None) -> int:
         cols.update(synth_columns(a.synth, a.method, a.planes, a.seed))
         cols = dict(sorted(cols.items(), key=lambda kv: _order(kv[0])))
     if a.real:
-        cols.update(real_columns(Path(a.real), a.method, a.seed, a.min_fraction))
+        cols.update(real_columns(Path(a.real), a.method, a.seed, a.min_fraction, a.creases))
     results = {k: c.summary(a.bootstrap, a.seed) for k, c in cols.items()}
     for k, s in results.items():
         _print(k, s)

@@ -8,13 +8,15 @@ into an :class:`EvaluationPlan` without running anything. The pieces are public 
 :func:`summarize`, :func:`discontinuity_share` (how much of a frame lies near an edge).
 Real sensor frames without ground truth are scored on their large planes:
 :func:`plane_reference` finds them, :func:`score_planes` scores an estimate on their interiors
-and rims, :func:`run_plane_evaluation` does both for every frame and method of a dataset.
+and rims, :func:`run_plane_evaluation` does both for every frame and method of a dataset;
+:func:`crease_band` adds the pixels by their creases, each against the face it sees.
 
 Matplotlib is imported only when figures are drawn.
 """
 
 from __future__ import annotations
 
+from ._creases import CreaseBand, crease_band
 from ._env import machine_description
 from ._methods import MethodSpec, parse_method_spec, resolve_methods
 from ._planes import (
@@ -56,6 +58,7 @@ __all__ = [
     "FIELDS",
     "HIST_BIN_DEG",
     "INVALID_POLICIES",
+    "CreaseBand",
     "EvaluationPlan",
     "EvaluationResult",
     "FrameScore",
@@ -65,6 +68,7 @@ __all__ = [
     "PlaneReference",
     "Protocol",
     "SceneShare",
+    "crease_band",
     "discontinuity_mask",
     "discontinuity_share",
     "group_levels_key",
