@@ -4,9 +4,11 @@ For every folder of ``../shared/data/real-sensors`` (Kinect v1, Xtion, densified
 ground truth), each frame's plane reference (``depthnormals.evaluate.plane_reference``, the
 threshold from ``sensor_threshold``: Kinect z^2 model, 5 cm for LiDAR) scores every method on
 the plane interiors (>= 5 px inside) and rims (1-4 px inside): mean angular error (deg) and
-coverage. Prints one table per measure (methods x folders, and the mean over folders), then
-the single-thread time of ``3f2n+`` against OpenCV's FALS (window 7) per frame, the two
-interleaved in the same run (median of ``--repeats``; thread CPU time beside wall time, as
+coverage; and in the bands by the planes' creases (``crease_band``: within 10 px of the line
+where two planes over 30 deg apart meet, each pixel against the face it sees by geometry),
+which the plane reference leaves out. Prints one table per measure (methods x folders, and the
+mean over folders), then the single-thread time of ``3f2n+`` against OpenCV's FALS (window 7)
+per frame, the two interleaved in the same run (median of ``--repeats``; thread CPU time beside wall time, as
 in ``benchmarks/targets.py``: the shared VM moves wall-clock medians).
 
 Every estimate is turned to face the camera (``dot(n, X) < 0``), as ours are, so the peers'
@@ -29,7 +31,13 @@ import numpy as np
 import depthnormals as dn
 from depthnormals.camera import backproject
 from depthnormals.datasets import open as open_dataset
-from depthnormals.evaluate import plane_reference, score_planes, sensor_threshold
+from depthnormals.evaluate import (
+    crease_band,
+    plane_reference,
+    score_creases,
+    score_planes,
+    sensor_threshold,
+)
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from targets import fals_apply, measure_all
@@ -113,18 +121,23 @@ def accuracy(root: Path, labels: list[str], seed: int) -> dict:
     for frame in open_dataset(root):
         ref = plane_reference(frame.depth, frame.K, seed=seed,
                               threshold=sensor_threshold(frame.meta))
+        band = crease_band(frame.depth, frame.K, ref)
         planes[frame.group] = planes.get(frame.group, 0) + ref.n_planes
         depth = frame.depth.astype(np.float32)
         for label in labels:
             est = _facing(METHODS[label](depth, frame.K), depth, frame.K)
-            per.setdefault(frame.group, {}).setdefault(label, []).append(score_planes(est, ref))
+            score = score_planes(est, ref)
+            creases = score_creases(est, band)
+            score.update({f"crease_{k}": creases[k] for k in ("mean", "near_mean", "far_mean")})
+            per.setdefault(frame.group, {}).setdefault(label, []).append(score)
     out: dict = {}
     for group, by_label in per.items():
         out[group] = {"planes": planes[group]}
         for label, scores in by_label.items():
-            out[group][label] = {k: float(np.nanmean([s[k] for s in scores]))
+            out[group][label] = {k: _nanmean([s[k] for s in scores])
                                  for k in ("interior_mean", "rim_mean", "interior_median",
-                                           "rim_median", "coverage")}
+                                           "rim_median", "coverage", "crease_mean",
+                                           "crease_near_mean", "crease_far_mean")}
             out[group][label]["frames"] = len(scores)
     return out
 
@@ -148,6 +161,12 @@ def speed(root: Path, repeats: int) -> list[dict]:
                      "opencv-fals-7_cpu_ms": cv_cpu, "opencv-fals-7_wall_ms": cv_wall,
                      "ratio_cpu": ours_cpu / cv_cpu, "ratio_wall": ours_wall / cv_wall})
     return rows
+
+
+def _nanmean(values: list[float]) -> float:
+    """Mean of the finite values (a frame without a crease has none), NaN when none is."""
+    v = np.asarray(values, dtype=np.float64)
+    return float(v[np.isfinite(v)].mean()) if np.isfinite(v).any() else float("nan")
 
 
 def _table(acc: dict, labels: list[str], key: str, scale: float = 1.0, digits: int = 2) -> str:
@@ -206,6 +225,14 @@ def main(argv: list[str] | None = None) -> int:
     print(_table(acc, labels, "interior_mean"))
     print("\n### rim mean error (deg), 1-4 px inside\n")
     print(_table(acc, labels, "rim_mean"))
+    print("\n### crease bands: mean error (deg) within 10 px of where two planes over 30 deg "
+          "apart meet, each pixel against the face it sees (crease_band; frames without one "
+          "left out)\n")
+    print(_table(acc, labels, "crease_mean"))
+    print("\n### crease bands, the 3 px by the line\n")
+    print(_table(acc, labels, "crease_near_mean"))
+    print("\n### crease bands, 3-10 px from the line\n")
+    print(_table(acc, labels, "crease_far_mean"))
     print("\n### coverage (% of plane pixels with an estimate)\n")
     print(_table(acc, labels, "coverage", 100.0, 1))
     timing: list[dict] = []
@@ -223,13 +250,15 @@ def main(argv: list[str] | None = None) -> int:
         ratios = [r["ratio_cpu"] for r in timing]
         print(f"\nmedian ratio (cpu) {np.median(ratios):.2f}, range {min(ratios):.2f}-{max(ratios):.2f}")
     if args.json is not None:
-        args.json.write_text(json.dumps({"machine": machine(), "git": _git_state(),
+        from depthnormals.io import write_bytes_atomic
+
+        write_bytes_atomic(args.json, json.dumps({"machine": machine(), "git": _git_state(),
                                          "command": "python benchmarks/real_sensors.py "
                                                     + " ".join(argv if argv is not None
                                                                else sys.argv[1:]),
                                          "methods": labels,
                                          "seed": args.seed, "accuracy": acc, "speed": timing},
-                                        indent=2, default=float) + "\n")
+                                        indent=2, default=float).encode() + b"\n")
     return 0
 
 

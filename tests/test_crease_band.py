@@ -9,7 +9,7 @@ import pytest
 
 import depthnormals as dn
 from depthnormals.analytic import Box, Plane, Scene, box_on_floor, demo_room, stairs
-from depthnormals.evaluate import CreaseBand, crease_band, plane_reference
+from depthnormals.evaluate import CreaseBand, crease_band, plane_reference, score_creases
 
 
 def _band(scene, **kw):
@@ -90,3 +90,35 @@ def test_bad_arguments():
     with pytest.raises(ValueError, match="band_px"):
         crease_band(r.depth, r.K, ref, band_px=0)
     assert isinstance(crease_band(r.depth, r.K, ref), CreaseBand)
+
+
+def test_score_creases_near_and_far():
+    """``score_creases``: the exact normals score about 0 (median) with full coverage; an
+    estimate missing the 3 px by the line is scored on the rest only (coverage their share, the
+    near part NaN); a normal map facing away errs 180 deg everywhere."""
+    r, _, band = _band(box_on_floor())
+    exact = score_creases(r.normals, band)
+    assert exact["median"] < 0.1 and exact["coverage"] == 1.0 and exact["n"] == band.mask.sum()
+    near = band.mask & (band.distance < 3.0)
+    est = r.normals.copy()
+    est[near] = np.nan
+    s = score_creases(est, band)
+    assert np.isnan(s["near_mean"]) and s["scored"] == int((band.mask & ~near).sum())
+    assert s["coverage"] == pytest.approx(1.0 - near.sum() / band.mask.sum())
+    assert s["far_mean"] == pytest.approx(exact["far_mean"])
+    away = score_creases(-r.normals, band)
+    assert away["median"] == pytest.approx(180.0, abs=0.1)
+    with pytest.raises(TypeError, match="CreaseBand"):
+        score_creases(r.normals, band.normals)
+    with pytest.raises(ValueError, match="differ in shape"):
+        score_creases(r.normals[:-1], band)
+
+
+def test_examples_in_the_docstrings():
+    """The module's examples run as written (the suite runs no doctests elsewhere)."""
+    import doctest
+
+    from depthnormals.evaluate import _creases
+
+    result = doctest.testmod(_creases)
+    assert result.attempted >= 8 and result.failed == 0

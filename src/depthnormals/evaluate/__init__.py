@@ -16,7 +16,7 @@ Matplotlib is imported only when figures are drawn.
 
 from __future__ import annotations
 
-from ._creases import CreaseBand, crease_band
+from ._creases import CreaseBand, crease_band, score_creases
 from ._env import machine_description
 from ._methods import MethodSpec, parse_method_spec, resolve_methods
 from ._planes import (
@@ -83,6 +83,7 @@ __all__ = [
     "resolve_methods",
     "run_evaluation",
     "run_plane_evaluation",
+    "score_creases",
     "score_frame",
     "score_planes",
     "scoring_mask",
