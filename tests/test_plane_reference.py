@@ -357,6 +357,15 @@ def test_run_plane_evaluation(tmp_path):
     assert saved["settings"]["reference"] == "planes" and saved["settings"]["seed"] == 0
     assert saved["frames"][0]["planes"][0]["n_pixels"] == f["planes"][0]["n_pixels"]
     assert "| cam | 3f2n+ |" in (tmp_path / "out" / "planes.md").read_text()
+    # the crease bands: the box's foot on the floor (concave) and its top edge (convex), every
+    # band pixel scored; the default places them closer than FALS-11 (7.0 against 17.3 deg)
+    pairs = f["creases"]["pairs"]
+    assert {p["convex"] for p in pairs} == {True, False} and f["creases"]["pixels"] > 1000
+    ours, fals = f["scores"]["3f2n+"], f["scores"]["fals[window=11]"]
+    assert ours["n_crease"] == ours["scored_crease"] == f["creases"]["pixels"]
+    assert ours["crease_mean"] < fals["crease_mean"]
+    assert res.summary["(all)"]["3f2n+"]["pooled_crease_mean"] == pytest.approx(ours["crease_mean"])
+    assert "crease (deg)" in (tmp_path / "out" / "planes.md").read_text()
     (png,) = res.figures
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 

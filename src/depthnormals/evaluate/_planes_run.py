@@ -2,8 +2,9 @@
 
 The front end of the plane reference (:mod:`._planes`) for datasets without ground-truth
 normals (real sensor folders): per frame, the plane reference once, then each method's
-estimate scored on the plane interiors and rims. Writes ``planes.json`` (per frame and plane,
-and the summary per group and method), ``planes.md`` (the table) and one figure per frame.
+estimate scored on the plane interiors and rims and in the bands by the planes' creases
+(:mod:`._creases`). Writes ``planes.json`` (per frame and plane, and the summary per group and
+method), ``planes.md`` (the table) and one figure per frame.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from .._progress import Progress
+from ._creases import CreaseBand, crease_band, score_creases
 from ._env import machine_description
 from ._methods import MethodSpec, resolve_methods
 from ._planes import PlaneReference, plane_reference, score_planes, sensor_threshold
@@ -28,7 +30,8 @@ __all__ = ["PlaneEvaluationResult", "plane_summary", "plane_table_markdown",
 
 #: The group of the summary that pools every frame.
 ALL = "(all)"
-_KEYS = ("interior_mean", "rim_mean", "interior_median", "rim_median", "coverage")
+_KEYS = ("interior_mean", "rim_mean", "interior_median", "rim_median", "coverage",
+         "crease_mean", "crease_near_mean", "crease_far_mean")
 
 
 @dataclass
@@ -41,8 +44,10 @@ class PlaneEvaluationResult:
         The output folder.
     frames : list of dict
         Per frame: ``group``, ``frame``, ``planes`` (the reference's :class:`PlaneInfo` as
-        dicts), ``settings`` (of the reference) and ``scores`` (method label -> the dict of
-        :func:`score_planes` plus ``ms``).
+        dicts), ``creases`` (the crease band's pairs and pixels), ``settings`` (of the
+        reference) and ``scores`` (method label -> the dict of :func:`score_planes` plus
+        ``crease_mean``, ``crease_near_mean``, ``crease_far_mean``, ``n_crease`` and
+        ``scored_crease`` of :func:`score_creases`, and ``ms``).
     summary : dict
         group -> method -> the means over frames (see :func:`plane_summary`).
     table : str
@@ -64,10 +69,11 @@ class PlaneEvaluationResult:
 def plane_summary(frames: Sequence[Mapping[str, Any]], labels: Sequence[str]
                   ) -> dict[str, dict[str, dict[str, Any]]]:
     """Per group (and ``"(all)"``) and method: the mean over frames of each frame's
-    ``interior_mean``, ``rim_mean``, ``interior_median``, ``rim_median`` and ``coverage``
-    (frames where a value is NaN are left out of its mean), the pooled interior and rim means
-    (every scored pixel once: ``pooled_interior_mean``, ``pooled_rim_mean``), ``frames`` and
-    ``planes`` counted, and the median ``ms``."""
+    ``interior_mean``, ``rim_mean``, ``interior_median``, ``rim_median``, ``coverage`` and
+    crease-band means ``crease_mean``, ``crease_near_mean``, ``crease_far_mean`` (frames where
+    a value is NaN, e.g. without a crease, are left out of its mean), the pooled interior, rim
+    and crease means (every scored pixel once: ``pooled_interior_mean``, ``pooled_rim_mean``,
+    ``pooled_crease_mean``), ``frames`` and ``planes`` counted, and the median ``ms``."""
     groups: dict[str, list[Mapping[str, Any]]] = {}
     for f in frames:
         groups.setdefault(f["group"], []).append(f)
@@ -82,10 +88,10 @@ def plane_summary(frames: Sequence[Mapping[str, Any]], labels: Sequence[str]
             for key in _KEYS:
                 vals = [s[key] for s in scores if np.isfinite(s[key])]
                 entry[key] = float(np.mean(vals)) if vals else float("nan")
-            for part in ("interior", "rim"):
-                n = sum(s[f"scored_{part}"] for s in scores)
+            for part in ("interior", "rim", "crease"):
+                n = sum(s.get(f"scored_{part}", 0) for s in scores)
                 tot = sum(s[f"{part}_mean"] * s[f"scored_{part}"] for s in scores
-                          if s[f"scored_{part}"])
+                          if s.get(f"scored_{part}", 0))
                 entry[f"pooled_{part}_mean"] = tot / n if n else float("nan")
             ms = [s["ms"] for s in scores]
             entry["ms_median"] = float(np.median(ms)) if ms else float("nan")
@@ -99,28 +105,30 @@ def _cell(x: float, digits: int = 2) -> str:
 
 def plane_table_markdown(summary: Mapping[str, Mapping[str, Mapping[str, Any]]],
                          labels: Sequence[str]) -> str:
-    """The table: one row per (group, method) with the interior and rim means (deg), the
-    coverage (%) and the median ms; the groups in order, ``(all)`` last."""
-    lines = ["| group | method | interior (deg) | rim (deg) | interior median | rim median "
-             "| coverage (%) | planes | ms |",
-             "|---|---|---:|---:|---:|---:|---:|---:|---:|"]
+    """The table: one row per (group, method) with the interior, rim and crease-band means
+    (deg), the coverage (%) and the median ms; the groups in order, ``(all)`` last."""
+    lines = ["| group | method | interior (deg) | rim (deg) | crease (deg) | interior median "
+             "| rim median | coverage (%) | planes | ms |",
+             "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for g, per in summary.items():
         for label in labels:
             e = per[label]
             lines.append(f"| {g} | {label} | {_cell(e['interior_mean'])} | {_cell(e['rim_mean'])} "
+                         f"| {_cell(e['crease_mean'])} "
                          f"| {_cell(e['interior_median'])} | {_cell(e['rim_median'])} "
                          f"| {_cell(100 * e['coverage'], 1)} | {e['planes']} "
                          f"| {_cell(e['ms_median'], 1)} |")
     return "\n".join(lines) + "\n"
 
 
-def _frame_entry(frame: Any, ref: PlaneReference) -> dict[str, Any]:
+def _frame_entry(frame: Any, ref: PlaneReference, band: CreaseBand) -> dict[str, Any]:
     return {"group": frame.group, "frame": frame.name,
             "planes": [vars(p) | {"normal": list(p.normal)} for p in ref.planes],
+            "creases": {"pixels": int(band.mask.sum()), "pairs": list(band.pairs)},
             "settings": ref.settings, "scores": {}}
 
 
-def _score_frame(frame: Any, specs: Sequence[MethodSpec], ref: PlaneReference,
+def _score_frame(frame: Any, specs: Sequence[MethodSpec], ref: PlaneReference, band: CreaseBand,
                  warmed: set[str]) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     from ..metrics import angular_error
 
@@ -128,6 +136,10 @@ def _score_frame(frame: Any, specs: Sequence[MethodSpec], ref: PlaneReference,
     for spec in specs:
         est, ms = _estimate(spec, frame, warmed)
         s = score_planes(est, ref)
+        c = score_creases(est, band)
+        s.update({"crease_mean": c["mean"], "crease_near_mean": c["near_mean"],
+                  "crease_far_mean": c["far_mean"], "n_crease": c["n"],
+                  "scored_crease": c["scored"]})
         s["ms"] = ms
         scores[spec.label] = s
         errors[spec.label] = angular_error(est, ref.normal_map())
@@ -147,7 +159,8 @@ def run_plane_evaluation(dataset: Any, methods: str | Sequence[str | MethodSpec]
     :func:`sensor_threshold` unless ``threshold`` is given), then each method's estimate
     (:func:`depthnormals.estimate_normals`, compilation kept out of ``ms`` as in
     :func:`run_evaluation`) scored by :func:`score_planes` (signed errors: the reference
-    faces the camera). docs/evaluation.md, section "Real sensors without ground truth".
+    faces the camera) and in the frame's crease bands by :func:`score_creases`
+    (:func:`crease_band`). docs/evaluation.md, section "Real sensors without ground truth".
 
     Parameters
     ----------
@@ -213,8 +226,9 @@ def run_plane_evaluation(dataset: Any, methods: str | Sequence[str | MethodSpec]
             thr = threshold if threshold is not None else sensor_threshold(frame.meta)
             ref = plane_reference(frame.depth, frame.K, seed=seed, threshold=thr,
                                   consensus=consensus)
-            entry = _frame_entry(frame, ref)
-            entry["scores"], errors = _score_frame(frame, specs, ref, warmed)
+            band = crease_band(frame.depth, frame.K, ref)
+            entry = _frame_entry(frame, ref, band)
+            entry["scores"], errors = _score_frame(frame, specs, ref, band, warmed)
             entries.append(entry)
             if figures:
                 from ._planes_figures import plot_planes
@@ -241,6 +255,7 @@ def run_plane_evaluation(dataset: Any, methods: str | Sequence[str | MethodSpec]
                 "finished": datetime.now(timezone.utc).isoformat(timespec="seconds")}
     write_json(out_dir / "planes.json", {"settings": settings, "summary": summary,
                                          "frames": entries})
-    write_text(out_dir / "planes.md", "# Plane reference: interior / rim errors\n\n" + table)
+    write_text(out_dir / "planes.md", "# Plane reference: interior / rim / crease-band errors\n\n"
+               + table)
     return PlaneEvaluationResult(out_dir=out_dir, frames=entries, summary=summary, table=table,
                                  figures=drawn, settings=settings)
