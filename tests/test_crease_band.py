@@ -122,3 +122,25 @@ def test_examples_in_the_docstrings():
 
     result = doctest.testmod(_creases)
     assert result.attempted >= 8 and result.failed == 0
+
+
+def test_integer_depth_and_a_frame_without_planes():
+    """Millimetre depth with ``depth_scale`` gives the band of the metric depth (within a pixel
+    of rounding); a frame without planes (uniform random depth) an empty band, scored as NaN
+    with coverage NaN, and no warning either way."""
+    import warnings
+
+    r = box_on_floor().render()
+    metric = crease_band(r.depth, r.K, plane_reference(r.depth, r.K, min_fraction=0.005))
+    mm = np.round(r.depth * 1000.0).astype(np.uint16)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        band = crease_band(mm, r.K, plane_reference(mm, r.K, depth_scale=0.001, min_fraction=0.005),
+                           depth_scale=0.001)
+        assert abs(int(band.mask.sum()) - int(metric.mask.sum())) <= 20
+        z = np.random.default_rng(0).uniform(1.0, 3.0, (120, 160))
+        K = (100.0, 100.0, 79.5, 59.5)
+        empty = crease_band(z, K, plane_reference(z, K))
+        s = score_creases(np.zeros((120, 160, 3), np.float32), empty)
+    assert not empty.mask.any() and empty.pairs == ()
+    assert s["n"] == 0 and np.isnan(s["mean"]) and np.isnan(s["coverage"])
