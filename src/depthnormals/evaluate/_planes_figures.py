@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ._creases import CreaseBand
 from ._figures import _save
 from ._planes import PlaneReference
 
@@ -40,15 +41,20 @@ def planes_overlay(depth: np.ndarray, ref: PlaneReference) -> np.ndarray:
     return img
 
 
+#: Colour of the crease bands in the planes panel.
+BAND_RGB = (0.1, 0.1, 0.1)
+
+
 def plot_planes(path: str | Path, depth: np.ndarray, ref: PlaneReference, *, title: str = "",
                 errors: Mapping[str, np.ndarray] | None = None, vmax: float = 20.0,
-                dpi: int = 100) -> None:
+                dpi: int = 100, band: CreaseBand | None = None) -> None:
     """The plane reference of one frame, written as PNG atomically.
 
     Panels, each titled: (i) depth (metres) with its colour bar; (ii) the planes over the
     grey depth, interiors in the plane's colour, rims lightened, each plane numbered at its
-    interior's centre with its pixel count; (iii ...) one angular-error map per method in
-    ``errors`` (degrees, 0 - ``vmax``), on the reference pixels only.
+    interior's centre with its pixel count, and the crease bands of ``band`` (if given) in
+    near-black; (iii ...) one angular-error map per method in ``errors`` (degrees, 0 -
+    ``vmax``), on the reference pixels only (and the bands').
     """
     from matplotlib.figure import Figure
 
@@ -64,20 +70,27 @@ def plot_planes(path: str | Path, depth: np.ndarray, ref: PlaneReference, *, tit
     fig.colorbar(im, ax=ax, fraction=0.046, pad=0.02, label="m")
     ax.set_title("depth (m)")
     ax = fig.add_subplot(rows, cols, 2)
-    ax.imshow(planes_overlay(depth, ref))
+    overlay = planes_overlay(depth, ref)
+    scored = ref.labels >= 0
+    if band is not None and band.mask.any():
+        overlay[band.mask] = 0.6 * np.asarray(BAND_RGB) + 0.4 * overlay[band.mask]
+        scored = scored | band.mask
+    ax.imshow(overlay)
     for info in ref.planes:
         v, u = np.nonzero((ref.labels == info.label) & ref.interior)
         if v.size:
             ax.text(float(np.median(u)), float(np.median(v)), str(info.label), color="black",
                     ha="center", va="center", fontsize=8,
                     bbox={"facecolor": "white", "alpha": 0.7, "pad": 1, "linewidth": 0})
-    ax.set_title(f"{ref.n_planes} planes: interior (solid), rim (light)")
+    banded = band is not None and bool(band.mask.any())
+    ax.set_title(f"{ref.n_planes} planes: interior (solid), rim (light)"
+                 + ("\ncrease bands (dark)" if banded else ""))
     for i, (label, err) in enumerate(errors.items()):
         ax = fig.add_subplot(rows, cols, 3 + i)
-        e = np.where(ref.labels >= 0, err, np.nan)
+        e = np.where(scored, err, np.nan)
         im = ax.imshow(e, cmap="magma", vmin=0.0, vmax=vmax)
         fig.colorbar(im, ax=ax, fraction=0.046, pad=0.02, label="deg")
-        ax.set_title(f"{label}: error on planes")
+        ax.set_title(f"{label}: error on planes" + ("\nand crease bands" if banded else ""))
     for a in fig.axes:
         if a.images and a.get_label() != "<colorbar>":
             a.set_xticks([])

@@ -133,6 +133,8 @@ def _score_frame(frame: Any, specs: Sequence[MethodSpec], ref: PlaneReference, b
     from ..metrics import angular_error
 
     scores, errors = {}, {}
+    truth = ref.normal_map()
+    truth[band.mask] = band.normals[band.mask]
     for spec in specs:
         est, ms = _estimate(spec, frame, warmed)
         s = score_planes(est, ref)
@@ -142,7 +144,7 @@ def _score_frame(frame: Any, specs: Sequence[MethodSpec], ref: PlaneReference, b
                   "scored_crease": c["scored"]})
         s["ms"] = ms
         scores[spec.label] = s
-        errors[spec.label] = angular_error(est, ref.normal_map())
+        errors[spec.label] = angular_error(est, truth)
     return scores, errors
 
 
@@ -235,7 +237,7 @@ def run_plane_evaluation(dataset: Any, methods: str | Sequence[str | MethodSpec]
 
                 path = out_dir / "figures" / f"planes-{_safe(frame.group)}-{_safe(frame.name)}.png"
                 path.parent.mkdir(parents=True, exist_ok=True)
-                plot_planes(path, frame.depth, ref, errors=errors,
+                plot_planes(path, frame.depth, ref, errors=errors, band=band,
                             title=f"{frame.group} / {frame.name}")
                 drawn.append(path)
             bar.update(f"{frame.group}/{frame.name}: {ref.n_planes} planes")
