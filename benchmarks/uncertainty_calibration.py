@@ -31,7 +31,10 @@ Columns:
   line where two reference planes over 30 deg apart meet, each pixel against the face it sees
   by geometry), which the plane references leave out and where a crease placed a few pixels
   off errs by the whole angle between the faces (a diagnosis: the targets are read on the
-  plane references).
+  plane references); and per distance from the crease line (0-1, 1-2, 2-3, 3-4, 4-6, 6-8,
+  8-10 px) the band's pixels, mean observed and predicted error and the share observed over 45
+  deg, for the real frames pooled and (with ``--synth``) each noisy sensor column, whose band
+  is found on the plane reference of its noisy depth and scored against the exact normals.
 
     python benchmarks/uncertainty_calibration.py [--method 3f2n+] [--synth /tmp/u-synth]
         [--real ../shared/data/real-sensors] [--planes] [--min-fraction F] [--creases] [--json OUT]
@@ -159,6 +162,35 @@ def bootstrap_bins(pred: list[np.ndarray], obs: list[np.ndarray], reps: int, see
             "all_pass_share": float(passed.all(axis=1).mean())}
 
 
+#: Distance bins (px from the crease line) of the crease-band profile (``--creases``).
+BAND_EDGES = (0.0, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 10.0 + 1e-9)
+
+
+class BandProfile:
+    """Per distance bin from the crease line: pixels, summed observed and predicted error and
+    the pixels observed over 45 deg (the other face, in effect)."""
+
+    def __init__(self) -> None:
+        self.sums = np.zeros((len(BAND_EDGES) - 1, 4))
+
+    def add(self, unc: np.ndarray, err: np.ndarray, distance: np.ndarray) -> None:
+        ok = np.isfinite(unc) & np.isfinite(err) & np.isfinite(distance)
+        k = np.searchsorted(BAND_EDGES, distance[ok], side="right") - 1
+        e, u = err[ok].astype(np.float64), unc[ok].astype(np.float64)
+        for col, w in enumerate((np.ones_like(e), e, u, (e > 45.0).astype(np.float64))):
+            self.sums[:, col] += np.bincount(k, weights=w, minlength=len(BAND_EDGES) - 1)[:len(self.sums)]
+
+    def rows(self) -> list[dict]:
+        out = []
+        for i, (n, o, p, wrong) in enumerate(self.sums):
+            lo, hi = BAND_EDGES[i], min(BAND_EDGES[i + 1], 10.0)
+            out.append({"from_px": lo, "to_px": hi, "pixels": int(n),
+                        "observed": o / n if n else float("nan"),
+                        "predicted": p / n if n else float("nan"),
+                        "over_45": wrong / n if n else float("nan")})
+        return out
+
+
 class Column:
     """The (prediction, observation) pairs of one column."""
 
@@ -200,12 +232,14 @@ def analytic_columns(method: str, noise: float, seed: int) -> dict[str, Column]:
     return {"analytic": col}
 
 
-def synth_columns(root: Path, method: str, planes: bool = False,
-                  seed: int = 0) -> dict[str, Column]:
+def synth_columns(root: Path, method: str, planes: bool = False, seed: int = 0,
+                  profiles: dict[str, BandProfile] | None = None) -> dict[str, Column]:
     """One column per sensor model of the synthetic folder ``root``; with ``planes`` also
-    its pixels on and off the plane reference of the noisy depth (module doc)."""
+    its pixels on and off the plane reference of the noisy depth (module doc); with
+    ``profiles`` (a dict), the crease-band profile of each noisy model, the band found on the
+    noisy depth's plane reference and scored against the exact normals."""
     from depthnormals.datasets.synthetic import read_synthetic
-    from depthnormals.evaluate import plane_reference, sensor_threshold
+    from depthnormals.evaluate import crease_band, plane_reference, sensor_threshold
 
     cols: dict[str, Column] = {}
     for f in read_synthetic(root):
@@ -213,8 +247,14 @@ def synth_columns(root: Path, method: str, planes: bool = False,
         n, u = dn.estimate_normals(f.depth, f.K, method=method, return_uncertainty=True)
         err = dn.angular_error(n, f.normals)
         cols.setdefault(f"synth/{variant}", Column()).add(u, err, f.mask)
-        if planes and variant != "clean":
+        if (planes or profiles is not None) and variant != "clean":
             ref = plane_reference(f.depth, f.K, seed=seed, threshold=sensor_threshold({}))
+        if profiles is not None and variant != "clean":
+            band = crease_band(f.depth, f.K, ref)
+            keep = band.mask if f.mask is None else band.mask & f.mask
+            profiles.setdefault(f"synth/{variant}", BandProfile()).add(
+                u, err, np.where(keep, band.distance, np.nan))
+        if planes and variant != "clean":
             on = ref.interior | ref.rim
             keep = np.ones(on.shape, dtype=bool) if f.mask is None else f.mask
             cols.setdefault(f"synth-planes/{variant}", Column()).add(u, err, keep & on)
@@ -223,7 +263,8 @@ def synth_columns(root: Path, method: str, planes: bool = False,
 
 
 def real_columns(root: Path, method: str, seed: int, min_fraction: float | None = None,
-                 creases: bool = False) -> dict[str, Column]:
+                 creases: bool = False, profiles: dict[str, BandProfile] | None = None
+                 ) -> dict[str, Column]:
     from depthnormals.datasets import open as open_dataset
     from depthnormals.evaluate import crease_band, plane_reference, sensor_threshold
 
@@ -251,6 +292,8 @@ def real_columns(root: Path, method: str, seed: int, min_fraction: float | None 
             mask = mask | band.mask
             cols.setdefault(f"real+creases/{group}", Column()).add(u, err, mask)
             cols["real+creases"].add(u, err, mask)
+            if profiles is not None:
+                profiles.setdefault("real", BandProfile()).add(u, err, band.distance)
     return cols
 
 
@@ -387,14 +430,24 @@ def main(argv: list[str] | None = None) -> int:
         speed(a.method, a.synth, a.real)
         return 0
     cols = analytic_columns(a.method, a.noise, a.seed)
+    profiles: dict[str, BandProfile] | None = {} if a.creases else None
     if a.synth is not None:
-        cols.update(synth_columns(a.synth, a.method, a.planes, a.seed))
+        cols.update(synth_columns(a.synth, a.method, a.planes, a.seed, profiles))
         cols = dict(sorted(cols.items(), key=lambda kv: _order(kv[0])))
     if a.real:
-        cols.update(real_columns(Path(a.real), a.method, a.seed, a.min_fraction, a.creases))
+        cols.update(real_columns(Path(a.real), a.method, a.seed, a.min_fraction, a.creases,
+                                 profiles))
     results = {k: c.summary(a.bootstrap, a.seed) for k, c in cols.items()}
     for k, s in results.items():
         _print(k, s)
+    bands = {k: p.rows() for k, p in (profiles or {}).items()}
+    if bands:
+        print("\ncrease bands by distance from the line (px): pixels, observed / predicted deg, "
+              "share observed over 45 deg")
+        for k, rows in bands.items():
+            print(f"  {k:24s} " + "  ".join(
+                f"{r['from_px']:g}-{r['to_px']:g}: {r['pixels']} {r['observed']:.1f}/"
+                f"{r['predicted']:.1f} {100 * r['over_45']:.0f}%" for r in rows))
     print("\nsummary: column, Spearman, bins passed, target (every bin; Spearman)")
     for k, s in results.items():
         t = target(k)
@@ -408,7 +461,8 @@ def main(argv: list[str] | None = None) -> int:
 
         write_bytes_atomic(a.json, json.dumps({"method": a.method, "noise": a.noise,
                                                "seed": a.seed, "synth": str(a.synth),
-                                               "real": str(a.real), "columns": results},
+                                               "real": str(a.real), "columns": results,
+                                               "crease_profiles": bands},
                                               indent=1).encode())
     if a.figure is not None:
         _figure(results, a.figure)

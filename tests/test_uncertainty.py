@@ -844,3 +844,21 @@ def test_calibration_bench_scores_the_crease_bands_on_request(shared_data, load_
     added = ((more["mean_observed"] * more["pixels"] - plain["mean_observed"] * plain["pixels"])
              / (more["pixels"] - plain["pixels"]))
     assert added > 5 * plain["mean_observed"]
+
+
+def test_calibration_bench_band_profile_bins_by_distance(load_benchmark):
+    """``--creases``' profile: each band pixel counted once in the bin of its distance from the
+    crease line (0-1, 1-2, 2-3, 3-4, 4-6, 6-8, 8-10 px; 10 itself in the last), with the mean
+    observed and predicted error and the share observed over 45 deg; NaN distance (off the
+    band) or a NaN map left out."""
+    bench = load_benchmark("uncertainty_calibration")
+    prof = bench.BandProfile()
+    d = np.array([0.0, 0.5, 1.0, 3.9, 5.0, 10.0, np.nan, 2.0])
+    err = np.array([90.0, 10.0, 50.0, 20.0, 30.0, 1.0, 5.0, 7.0])
+    unc = np.array([10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, np.nan])
+    prof.add(unc, err, d)
+    rows = prof.rows()
+    assert [r["pixels"] for r in rows] == [2, 1, 0, 1, 1, 0, 1]
+    assert rows[0]["observed"] == 50.0 and rows[0]["predicted"] == 15.0 and rows[0]["over_45"] == 0.5
+    assert rows[1]["over_45"] == 1.0 and np.isnan(rows[2]["observed"])
+    assert rows[6]["to_px"] == 10.0 and rows[6]["predicted"] == 60.0
