@@ -8,8 +8,8 @@ coverage; and in the bands by the planes' creases (``crease_band``: within 10 px
 where two planes over 30 deg apart meet, each pixel against the face it sees by geometry),
 which the plane reference leaves out. Prints one table per measure (methods x folders, and the
 mean over folders), then the single-thread time of ``3f2n+`` against OpenCV's FALS (window 7)
-per frame, the two interleaved in the same run (median of ``--repeats``; thread CPU time beside wall time, as
-in ``benchmarks/targets.py``: the shared VM moves wall-clock medians).
+per frame, the two interleaved in the same run (median of ``--repeats``; thread CPU time
+beside wall time, as in ``benchmarks/targets.py``: the shared VM moves wall-clock medians).
 
 Every estimate is turned to face the camera (``dot(n, X) < 0``), as ours are, so the peers'
 arbitrary signs do not count as errors; zero vectors count as missing.
