@@ -20,7 +20,14 @@ a plane's 3x3 there): the other face's plane must explain the pixel's neighbourh
 a plane explains a typical one. One pass, on the output of ``estimate_normals(depth, K)``.
 
     python benchmarks/crease_refinement.py [--real ../shared/data/real-sensors]
-        [--synth /tmp/u-synth ...] [--fit 6] [--span 4]
+        [--synth /tmp/u-synth ...] [--fit 6] [--span 4] [--half] [--measured-only]
+
+``--half``: the rule on every second row and column (span and tile halved; each pixel takes
+its 2x2 cell's switch), as the measured-support branch chooses its windows from radius
+``HALF_RADIUS``: a quarter of the pixels. ``--measured-only``: only on frames whose default
+takes the measured-support branch (``dn.noise_profile(depth, K).branch``: every real frame,
+the synthetic kinect_v1 and realsense_d4xx columns; gaussian, kinect_v2 and tof take the
+i.i.d. box-fit and are left as they are).
 
 Prints, for the real frames, the mean over folders of the plane interiors, rims and the crease
 bands (all, within 3 px of the line, 3-10 px) before and after, and per folder; for each
@@ -131,6 +138,32 @@ def refine(depth: np.ndarray, K, normals: np.ndarray, *, span: int = 4, angle: f
     return out.astype(np.float32), switch
 
 
+def refine_half(depth: np.ndarray, K, normals: np.ndarray, *, span: int = 4, **kw
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`refine` on every second row and column (intrinsics halved, ``span // 2`` cells,
+    16-cell tiles); each pixel takes its 2x2 cell's switch and new normal."""
+    from depthnormals.camera import Intrinsics, as_intrinsics
+
+    cam = as_intrinsics(K)
+    half = Intrinsics(cam.fx / 2.0, cam.fy / 2.0, cam.cx / 2.0, cam.cy / 2.0)
+    n2, s2 = refine(np.ascontiguousarray(depth[::2, ::2]), half,
+                    np.ascontiguousarray(np.asarray(normals)[::2, ::2]),
+                    span=max(1, span // 2), tile=16, **kw)
+    h, w = depth.shape
+    switch = np.repeat(np.repeat(s2, 2, 0), 2, 1)[:h, :w]
+    cells = np.repeat(np.repeat(n2, 2, 0), 2, 1)[:h, :w]
+    out = np.where(switch[..., None], cells, np.asarray(normals, np.float32))
+    return out.astype(np.float32), switch
+
+
+def _apply(depth: np.ndarray, K, normals: np.ndarray, *, half: bool = False,
+           measured_only: bool = False, **kw) -> tuple[np.ndarray, np.ndarray]:
+    """The rule as the options ask (module doc); unchanged normals where it does not run."""
+    if measured_only and dn.noise_profile(depth, K).branch != "measured-support":
+        return np.asarray(normals, np.float32), np.zeros(depth.shape, bool)
+    return (refine_half if half else refine)(depth, K, normals, **kw)
+
+
 def real_table(root: Path, **kw) -> dict:
     """folder -> (before, after): means over the folder's frames of interior, rim, crease band,
     its near (< 3 px) and far parts (degrees)."""
@@ -149,7 +182,7 @@ def real_table(root: Path, **kw) -> dict:
         band = crease_band(f.depth, f.K, ref)
         depth = np.asarray(f.depth, np.float32)
         n0 = dn.estimate_normals(depth, f.K)
-        n1, _ = refine(depth, f.K, n0, **kw)
+        n1, _ = _apply(depth, f.K, n0, **kw)
         pair = []
         for n in (n0, n1):
             p, c = score_planes(n, ref), score_creases(n, band)
@@ -171,7 +204,7 @@ def synth_table(root: Path, **kw) -> dict:
             continue
         depth = np.asarray(f.depth, np.float32)
         n0 = dn.estimate_normals(depth, f.K)
-        n1, switch = refine(depth, f.K, n0, **kw)
+        n1, switch = _apply(depth, f.K, n0, **kw)
         keep = np.ones(depth.shape, bool) if f.mask is None else f.mask
         e0, e1 = dn.angular_error(n0, f.normals), dn.angular_error(n1, f.normals)
         ok = keep & np.isfinite(e0) & np.isfinite(e1)
@@ -186,13 +219,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--synth", type=Path, nargs="*", default=[], help="synthetic folders")
     ap.add_argument("--fit", type=float, default=6.0)
     ap.add_argument("--span", type=int, default=4)
+    ap.add_argument("--half", action="store_true", help="on every second row and column")
+    ap.add_argument("--measured-only", action="store_true",
+                    help="only on frames of the measured-support branch")
     a = ap.parse_args(argv)
     if a.real and not Path(a.real).is_dir():
         ap.error(f"--real {a.real}: no such folder (pass --real '' to leave the real frames out)")
     for s in a.synth:
         if not s.is_dir():
             ap.error(f"--synth {s}: no such folder")
-    kw = {"fit": a.fit, "span": a.span}
+    kw = {"fit": a.fit, "span": a.span, "half": a.half, "measured_only": a.measured_only}
     if a.real:
         table = real_table(Path(a.real), **kw)
         names = ("interior", "rim", "crease", "crease < 3 px", "crease 3-10 px")

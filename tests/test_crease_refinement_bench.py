@@ -62,3 +62,24 @@ def test_tile_lower_median(bench):
     finite = np.sort(a[np.isfinite(a)])
     assert m[0, 5] == finite[(finite.size - 1) // 2]
     assert m[5, 5] == np.sort(a[4:, 4:].ravel())[7]
+
+
+def test_half_grid_moves_the_crease_back_by_cells(bench):
+    """``--half``: the same rule on every second row and column; the wall's rows 366-369 that
+    carried the floor's normal take the wall's again (their cells' switch), rows far from the
+    crease keep theirs; ``--measured-only`` leaves a frame of the i.i.d. branch as it is."""
+    r, depth = _floor_and_wall(0.001)
+    v0 = r.K.cy + r.K.fy / 4.0
+    rows = np.arange(depth.shape[0])[:, None] + np.zeros(depth.shape[1], int)[None, :]
+    est = r.normals.astype(np.float32).copy()
+    wrong = (rows > v0 - 5) & (rows < v0)
+    est[wrong] = r.normals[rows > v0][0]
+    out, switch = bench.refine_half(depth, r.K, est)
+    clear = (wrong & (rows < v0 - 1))[:, 8:-8]
+    fixed = np.abs(out[:, 8:-8][clear] - r.normals[:, 8:-8][clear]).max(-1) < 1e-6
+    assert fixed.all()
+    far = np.abs(rows - v0) >= 8
+    np.testing.assert_array_equal(out[far], est[far])
+    same, none = bench._apply(depth, r.K, est, measured_only=True)
+    assert not none.any()
+    np.testing.assert_array_equal(same, est)
