@@ -80,6 +80,7 @@ def test_half_grid_moves_the_crease_back_by_cells(bench):
     assert fixed.all()
     far = np.abs(rows - v0) >= 8
     np.testing.assert_array_equal(out[far], est[far])
+    assert switch[:, 8:-8][clear].all() and not switch[far].any()
     same, none = bench._apply(depth, r.K, est, measured_only=True)
     assert not none.any()
     np.testing.assert_array_equal(same, est)
