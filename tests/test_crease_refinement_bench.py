@@ -22,25 +22,27 @@ def _floor_and_wall(noise_m: float, seed: int = 0):
     return r, depth.astype(np.float32)
 
 
-def test_a_crease_placed_rows_off_moves_back(bench):
+@pytest.mark.parametrize("half", [False, True])
+def test_a_crease_placed_rows_off_moves_back(bench, half):
     """The wall's last five rows above the crease carrying the floor's normal (a crease placed
     five rows too high, as the windows of the default place real ones) take the wall's again
     with 1 mm of depth noise, all but the row by the line (0.75 px: its 3x3 holds the floor's
     row, a tie the rule leaves as it is); rows eight or more from the crease keep their
-    normals."""
+    normals. The same on every second row and column (``--half``: rows 366-369 take their
+    cells' switch)."""
     r, depth = _floor_and_wall(0.001)
     v0 = r.K.cy + r.K.fy / 4.0
     rows = np.arange(depth.shape[0])[:, None] + np.zeros(depth.shape[1], int)[None, :]
     est = r.normals.astype(np.float32).copy()
     wrong = (rows > v0 - 5) & (rows < v0)
     est[wrong] = r.normals[rows > v0][0]
-    out, switch = bench.refine(depth, r.K, est)
+    out, switch = (bench.refine_half if half else bench.refine)(depth, r.K, est)
     clear = (wrong & (rows < v0 - 1))[:, 8:-8]
     fixed = np.abs(out[:, 8:-8][clear] - r.normals[:, 8:-8][clear]).max(-1) < 1e-6
     assert clear.sum() == 4 * (depth.shape[1] - 16) and fixed.all()
     far = np.abs(rows - v0) >= 8
     np.testing.assert_array_equal(out[far], est[far])
-    assert not switch[far].any()
+    assert switch[:, 8:-8][clear].all() and not switch[far].any()
 
 
 def test_one_plane_never_switches(bench):
@@ -64,23 +66,14 @@ def test_tile_lower_median(bench):
     assert m[5, 5] == np.sort(a[4:, 4:].ravel())[7]
 
 
-def test_half_grid_moves_the_crease_back_by_cells(bench):
-    """``--half``: the same rule on every second row and column; the wall's rows 366-369 that
-    carried the floor's normal take the wall's again (their cells' switch), rows far from the
-    crease keep theirs; ``--measured-only`` leaves a frame of the i.i.d. branch as it is."""
+def test_measured_only_leaves_the_iid_branch(bench):
+    """``--measured-only`` leaves a frame of the i.i.d. branch (1 mm of independent noise) as
+    it is, even where the rule would move a misplaced crease back."""
     r, depth = _floor_and_wall(0.001)
     v0 = r.K.cy + r.K.fy / 4.0
     rows = np.arange(depth.shape[0])[:, None] + np.zeros(depth.shape[1], int)[None, :]
     est = r.normals.astype(np.float32).copy()
-    wrong = (rows > v0 - 5) & (rows < v0)
-    est[wrong] = r.normals[rows > v0][0]
-    out, switch = bench.refine_half(depth, r.K, est)
-    clear = (wrong & (rows < v0 - 1))[:, 8:-8]
-    fixed = np.abs(out[:, 8:-8][clear] - r.normals[:, 8:-8][clear]).max(-1) < 1e-6
-    assert fixed.all()
-    far = np.abs(rows - v0) >= 8
-    np.testing.assert_array_equal(out[far], est[far])
-    assert switch[:, 8:-8][clear].all() and not switch[far].any()
+    est[(rows > v0 - 5) & (rows < v0)] = r.normals[rows > v0][0]
     same, none = bench._apply(depth, r.K, est, measured_only=True)
     assert not none.any()
     np.testing.assert_array_equal(same, est)

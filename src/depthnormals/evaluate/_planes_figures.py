@@ -72,9 +72,11 @@ def plot_planes(path: str | Path, depth: np.ndarray, ref: PlaneReference, *, tit
     ax = fig.add_subplot(rows, cols, 2)
     overlay = planes_overlay(depth, ref)
     scored = ref.labels >= 0
-    if band is not None and band.mask.any():
-        overlay[band.mask] = 0.6 * np.asarray(BAND_RGB) + 0.4 * overlay[band.mask]
-        scored = scored | band.mask
+    on_band = band.mask if band is not None else np.zeros_like(scored)
+    banded = bool(on_band.any())
+    if banded:
+        overlay[on_band] = 0.6 * np.asarray(BAND_RGB) + 0.4 * overlay[on_band]
+        scored = scored | on_band
     ax.imshow(overlay)
     for info in ref.planes:
         v, u = np.nonzero((ref.labels == info.label) & ref.interior)
@@ -82,7 +84,6 @@ def plot_planes(path: str | Path, depth: np.ndarray, ref: PlaneReference, *, tit
             ax.text(float(np.median(u)), float(np.median(v)), str(info.label), color="black",
                     ha="center", va="center", fontsize=8,
                     bbox={"facecolor": "white", "alpha": 0.7, "pad": 1, "linewidth": 0})
-    banded = band is not None and bool(band.mask.any())
     ax.set_title(f"{ref.n_planes} planes: interior (solid), rim (light)"
                  + ("\ncrease bands (dark)" if banded else ""))
     for i, (label, err) in enumerate(errors.items()):

@@ -89,9 +89,9 @@ def plane_summary(frames: Sequence[Mapping[str, Any]], labels: Sequence[str]
                 vals = [s[key] for s in scores if np.isfinite(s[key])]
                 entry[key] = float(np.mean(vals)) if vals else float("nan")
             for part in ("interior", "rim", "crease"):
-                n = sum(s.get(f"scored_{part}", 0) for s in scores)
+                n = sum(s[f"scored_{part}"] for s in scores)
                 tot = sum(s[f"{part}_mean"] * s[f"scored_{part}"] for s in scores
-                          if s.get(f"scored_{part}", 0))
+                          if s[f"scored_{part}"])
                 entry[f"pooled_{part}_mean"] = tot / n if n else float("nan")
             ms = [s["ms"] for s in scores]
             entry["ms_median"] = float(np.median(ms)) if ms else float("nan")
