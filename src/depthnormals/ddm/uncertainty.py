@@ -784,22 +784,25 @@ def _add_into(a, k, out_a, out_k):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _spreads_rows(v0, v1, planar, near_d, far_d, out):
+def _spreads_rows(v0, v1, near, far, near_d, far_d, out):
     """Rows ``[v0, v1)``: the mean angle (degrees) between the pixel's normal and the finite
-    normals ``near_d`` away to the right, left, below and above (``out[0]``), and the same
-    ``far_d`` away (``out[1]``), 0 without one. ``planar``: the normals by row (H, 3, W), so
+    normals ``near_d`` away to the right, left, below and above, all read in ``near``
+    (``out[0]``), and the same ``far_d`` away in ``far`` (``out[1]``), 0 without one.
+    ``near``, ``far``: normals by row (H, 3, W) (the same array, or two of one grid), so
     that a row's three components are one C-contiguous block (a (3, W) slice of (3, H, W) is
     strided, and the loops reading it ran scalar, 5x slower). Every loop runs along a row
     over contiguous memory."""
-    h, w = planar.shape[0], planar.shape[2]
+    h, w = far.shape[0], far.shape[2]
     f32 = np.float32
     ang = np.zeros(w, dtype=f32)
     ok = np.zeros(w, dtype=f32)
     acc = np.empty(w, dtype=f32)
     cnt = np.empty(w, dtype=f32)
     for v in range(v0, v1):
-        row = planar[v]
-        for k, d in enumerate((near_d, far_d)):
+        for k in range(2):
+            planar = near if k == 0 else far
+            d = near_d if k == 0 else far_d
+            row = planar[v]
             _cross_chords(row[0], row[1], row[2], planar[min(v + d, h - 1)],
                           planar[max(v - d, 0)], v + d < h, v >= d, d, ang, ok, acc, cnt)
             _mean_degrees(acc, cnt, out[k, v])
@@ -953,19 +956,22 @@ def _box_row(ii, v, r, lo, hi, inv, out):
         out[u] = (rb[d] - ra[d] - rb[c] + ra[c]) * (iv * inv[u])
 
 
-def _context(zg, ng, big: int, cam: tuple, shift: int = 1, *, growth: tuple) -> tuple:
+def _context(zg, ng, big: int, cam: tuple, shift: int = 1, *, growth: tuple,
+             near: np.ndarray | None = None) -> tuple:
     """What the measured support's map reads besides its level, on the grid of its choice
     (depth ``zg``, NaN where invalid, normals ``ng``, camera ``cam`` of that grid): the mean
-    angle of the normals :data:`NEAR_SPAN` away (H, W) and ``big`` away (1, H, W), each to
-    the right, left, below and above (:func:`_spreads_rows`), :func:`_densities` on every
+    angle of the normals :data:`NEAR_SPAN` away (H, W; read in ``near``, the normals the
+    branch returns on that grid, where given) and ``big`` away (1, H, W), each to the right,
+    left, below and above (:func:`_spreads_rows`), :func:`_densities` on every
     ``2^shift``-th row and column of that grid, and how far the pixels' planes miss their
     depth at each of :data:`DEPTH_SPANS` (S, H, W) (:func:`_offsets_rows`) with the inverse
     of their frame scales (:func:`_offset_scales`; ``growth = (zref, half)`` as in
     :func:`_support_rows`)."""
     h, w = zg.shape
     planar = np.ascontiguousarray(ng.transpose(0, 2, 1))
+    near_p = planar if near is None else np.ascontiguousarray(near.transpose(0, 2, 1))
     spreads = np.empty((2, h, w), dtype=np.float32)
-    run_rows(_spreads_rows, h, planar, NEAR_SPAN, max(1, big), spreads, min_rows=16)
+    run_rows(_spreads_rows, h, near_p, planar, NEAR_SPAN, max(1, big), spreads, min_rows=16)
     offsets = np.empty((len(DEPTH_SPANS), h, w), dtype=np.float32)
     run_rows(_offsets_rows, h, zg, planar, DEPTH_SPANS, tuple(float(x) for x in cam), offsets,
              min_rows=16)
@@ -1183,9 +1189,10 @@ def _support_branch(z, cam, sigma, prof):
     fx, fy, cx, cy = cam
     scores: list = []
     out = support_select(z, fx, fy, cx, cy, sigma, profile=prof, out_scores=scores)
-    # the spreads and offsets read the choice before the fallback: a pixel whose window was
-    # right reads as it did; the ones that fell back (deviation past ``limit``, as the branch
-    # decided it) read FALLBACK_SCALE times their map (_support_rows)
+    # the far spread and the offsets read the choice before the fallback: a pixel whose
+    # window was right reads as it did; the ones that fell back (deviation past ``limit``, as
+    # the branch decided it) read FALLBACK_SCALE times their map (_support_rows); the near
+    # spread reads the normals returned (module doc)
     score, _, chosen, dev, limit, halved = scores
     e_i = _interior_error(out, z, score, prof)
     zref = prof.depth if prof.depth == prof.depth else 1.0
@@ -1198,7 +1205,9 @@ def _support_branch(z, cam, sigma, prof):
         cam_g, big_g, rows = (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy), big // 2, 8
     else:
         zg, cam_g, big_g, rows = z, cam, big, 16
-    ctx = (*_context(zg, chosen, big_g, cam_g, growth=model[1:]), dev, limit)
+    # the normals returned on that grid (the choice itself where no pixel fell back)
+    near = (out[::2, ::2] if halved else out) if bool((dev > limit).any()) else None
+    ctx = (*_context(zg, chosen, big_g, cam_g, growth=model[1:], near=near), dev, limit)
     grid = np.empty(zg.shape, dtype=np.float32)  # (a half-grid cell of invalid depth: e_i)
     run_rows(_support_rows, zg.shape[0], zg, chosen, model, ctx, grid, min_rows=rows)
     if not halved:
