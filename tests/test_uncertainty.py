@@ -406,10 +406,10 @@ def test_spreads_match_numpy_in_any_bands(kernel):
     ``R`` to the right and below), the box-fit map's (``near_d`` :data:`NEAR_SPAN`: the four
     pixels that far, ``R`` to the right and below) and the measured support's
     (:func:`_spreads_rows`: the four pixels :data:`NEAR_SPAN` away and the four ``R`` away,
-    right, left, below and above; with ``support-two`` the near spread read in one field of
-    normals, the far one in another, as the map reads the normals returned near and the
-    choice far). A one-sided spread, a neighbour distance of 1 where 3 is meant or a spread
-    read in the wrong field fails it."""
+    right, left, below and above; with ``support-two`` the near spread the mean of the eight
+    angles read in two fields of normals, the far one in the first, as the map reads the
+    choice and the normals returned near and the choice far). A one-sided spread, a neighbour
+    distance of 1 where 3 is meant or a spread read in the wrong field fails it."""
     from depthnormals.ddm import uncertainty as U
 
     rng = np.random.default_rng(3)
@@ -418,8 +418,8 @@ def test_spreads_match_numpy_in_any_bands(kernel):
     n[rng.random((41, 53)) < 0.1] = np.nan
     big = 6
 
-    def cross(d, field=n):
-        return _mean_finite([_angle_ref(field, dv, du)
+    def cross(d, *fields):
+        return _mean_finite([_angle_ref(f, dv, du) for f in (fields or (n,))
                              for dv, du in ((-d, 0), (d, 0), (0, -d), (0, d))])
 
     assert U.NEAR_SPAN == 3
@@ -439,16 +439,18 @@ def test_spreads_match_numpy_in_any_bands(kernel):
                                                           0.0, 1.0), (40.0, 40.0, 26.0, 20.0),
                               np.empty((41, 53), np.float32), out, big, box)
     else:
+        two = kernel == "support-two"
         m = n
-        if kernel == "support-two":  # the near field: another one, with the same holes
+        if two:  # the returned field: another one, with the same holes and more
             m = rng.standard_normal((41, 53, 3)).astype(np.float32)
             m /= np.linalg.norm(m, axis=2, keepdims=True)
-            m[np.isnan(n[..., 0])] = np.nan
-        s1, sr = cross(U.NEAR_SPAN, m), cross(big)
+            m[np.isnan(n[..., 0]) | (rng.random((41, 53)) < 0.1)] = np.nan
+        s1 = cross(U.NEAR_SPAN, n, m) if two else cross(U.NEAR_SPAN)
+        sr = cross(big)
         planar = np.ascontiguousarray(n.transpose(0, 2, 1))  # (H, 3, W)
-        near = np.ascontiguousarray(m.transpose(0, 2, 1))
+        returned = np.ascontiguousarray(m.transpose(0, 2, 1))
         for v0, v1 in bands:
-            U._spreads_rows(v0, v1, near, planar, U.NEAR_SPAN, big, out)
+            U._spreads_rows(v0, v1, planar, returned, two, U.NEAR_SPAN, big, out)
     ok = np.isfinite(n[..., 0])
     np.testing.assert_allclose(out[0][ok], s1[ok], atol=2e-4)
     np.testing.assert_allclose(out[1][ok], sr[ok], atol=2e-4)
@@ -648,12 +650,12 @@ def _kinect_like_kerb(seed, shape=(240, 320), kerb=2.0, road=1.2, top=1.05):
 
 def test_support_map_reads_the_returned_normals_near(monkeypatch):
     """The measured support's near spread reads the normals the branch returns (on the map's
-    grid), the far spread and the offsets the choice before the fallback: on a Kinect-like
-    kerb the riser's pixels fall back, and the map gets those normals as ``near`` (None on a
-    plane where none falls back). The rows of the riser by its two creases, which keep the
-    road's normal and err 73-88 deg (seeds 0-3), read 1.4x the map of the choice alone on
-    average (4.9 / 5.1 / 6.1 / 5.4 deg against 3.3 / 3.1 / 6.1 / 3.5, session 20): still far
-    below their error, which no spread sees (docs/benchmarks.md 17)."""
+    grid) beside the choice, the far spread and the offsets the choice before the fallback
+    alone: on a Kinect-like kerb the riser's pixels fall back, and the map gets those normals
+    as ``near`` (None on a plane where none falls back). The rows of the riser by its two
+    creases, which keep the road's normal and err 73-88 deg (seeds 0-3), read 1.26x the map
+    of the choice alone on average (4.3 / 4.3 / 6.1 / 4.6 deg against 3.3 / 3.1 / 6.1 / 3.5,
+    session 20): still far below their error, which no spread sees (docs/benchmarks.md 17)."""
     from depthnormals.ddm import uncertainty as U
 
     seen = []
@@ -682,7 +684,7 @@ def test_support_map_reads_the_returned_normals_near(monkeypatch):
         err = dn.angular_error(n, g)
         assert np.nanmean(err[margins]) > 60.0
         ratios.append(np.nanmean(u[margins]) / np.nanmean(u0[margins]))
-    assert np.mean(ratios) > 1.25, ratios
+    assert np.mean(ratios) > 1.15, ratios
     assert min(ratios) >= 0.99, ratios
     seen.clear()
     r, d = _plane(0.1)
@@ -789,9 +791,8 @@ def test_real_frame_held_out(shared_data):
     4.74 against 5.25 deg observed (the former map: Spearman 0.39 over the folder's two
     frames, docs/benchmarks.md 17); since session 16's fallback of narrow faces 0.553, 4.96
     against 4.47 (the normals err less, the map reads the choice before the fallback); since
-    session 20's near spread on the normals returned 0.534, 5.38 against 4.47 (the price of
-    the synthetic Kinect v1 column's bins, docs/benchmarks.md 17: still above the real
-    frames' target of 0.5)."""
+    session 20's near spread on the choice and the normals returned 0.548, 5.28 against 4.47
+    (on the normals returned alone 0.534, docs/benchmarks.md 17)."""
     from depthnormals.evaluate import plane_reference, sensor_threshold
 
     f = next(iter(dn.datasets.open(shared_data / "real-sensors" / "tum_fr2_kinect1_slambook")))
@@ -804,7 +805,7 @@ def test_real_frame_held_out(shared_data):
     m = (ref.interior | ref.rim) & np.isfinite(err) & np.isfinite(u)
     p, o = u[m].astype(np.float64), err[m].astype(np.float64)
     rank = np.corrcoef(np.argsort(np.argsort(p)), np.argsort(np.argsort(o)))[0, 1]
-    assert rank >= 0.52, rank
+    assert rank >= 0.54, rank
     assert abs(p.mean() - o.mean()) <= 0.25 * o.mean(), (p.mean(), o.mean())
 
 

@@ -63,13 +63,12 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
   face beside it, coherently, so no spread sees it, but its depth does; the level, the far
   spread and the offsets read on the branch's choice before its fallback to small windows
   (session 16, :func:`depthnormals.ddm.support._fallback_rows`), the pixels that fell back at
-  :data:`FALLBACK_SCALE` times their map, and the near spread on the normals the branch
-  returns (session 20): where a narrow face fell back, its strip of returned normals lies a
-  few cells from pixels of that face that kept the neighbour face's normal (within about 6
-  pixels of the true crease, erring up to 90 deg), which the choice, one face throughout,
-  hides (on the synthetic kinect_v1 column the decile bins went from 9 / 7 / 10 / 9 / 8 to
-  9 / 10 / 10 / 10 / 9 of 10 over seeds 0-4, the real frames' pooled Spearman 0.680 ->
-  0.673; docs/benchmarks.md 17);
+  :data:`FALLBACK_SCALE` times their map, and the near spread on both the choice and the
+  normals the branch returns, the mean of the eight angles (session 20): where a narrow face
+  fell back, its strip of returned normals lies a few cells from pixels of that face that
+  kept the neighbour face's normal (within about 6 pixels of the true crease, erring up to 90
+  deg), which the choice, one face throughout, hides; read on the returned normals alone
+  the real frames' sporadic fallbacks raise their correct neighbours (docs/benchmarks.md 17);
 - **clean depth** (the plane hypotheses): the float rounding of the one-pixel stencils
   (``sigma / sqrt(6)``) plus, where the pixel's normal agrees with none of its four neighbours'
   (a facet narrower than two pixels: no one-sided stencil fits), the least angle between them.
@@ -214,7 +213,7 @@ DEPTH_FULL = 0.5
 FALLBACK_SCALE = 0.8
 #: The near spread ``s_N`` of both noisy maps: cells of the map's grid (the box-fit's is
 #: the pixel grid; the measured support's is mostly the half grid, 6 pixels; there it reads
-#: the normals returned, after the fallback).
+#: both the choice and the normals returned, after the fallback).
 NEAR_SPAN = 3
 SPREAD_LEVEL = 0.1
 LEVEL_FLOOR = 0.5
@@ -791,27 +790,34 @@ def _add_into(a, k, out_a, out_k):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _spreads_rows(v0, v1, near, far, near_d, far_d, out):
+def _spreads_rows(v0, v1, planar, returned, two, near_d, far_d, out):
     """Rows ``[v0, v1)``: the mean angle (degrees) between the pixel's normal and the finite
-    normals ``near_d`` away to the right, left, below and above, all read in ``near``
-    (``out[0]``), and the same ``far_d`` away in ``far`` (``out[1]``), 0 without one.
-    ``near``, ``far``: normals by row (H, 3, W) (the same array, or two of one grid), so
-    that a row's three components are one C-contiguous block (a (3, W) slice of (3, H, W) is
-    strided, and the loops reading it ran scalar, 5x slower). Every loop runs along a row
-    over contiguous memory."""
-    h, w = far.shape[0], far.shape[2]
+    normals ``near_d`` away to the right, left, below and above (``out[0]``), and the same
+    ``far_d`` away (``out[1]``), 0 without one, read in ``planar``; with ``two``, the near
+    spread is the mean over both fields, ``planar``'s four angles and ``returned``'s (normals of
+    the same grid). ``planar``, ``returned``: normals by row (H, 3, W), so that a row's three
+    components are one C-contiguous block (a (3, W) slice of (3, H, W) is strided, and the
+    loops reading it ran scalar, 5x slower). Every loop runs along a row over contiguous
+    memory."""
+    h, w = planar.shape[0], planar.shape[2]
     f32 = np.float32
     ang = np.zeros(w, dtype=f32)
     ok = np.zeros(w, dtype=f32)
     acc = np.empty(w, dtype=f32)
     cnt = np.empty(w, dtype=f32)
+    acc2 = np.empty(w, dtype=f32)
+    cnt2 = np.empty(w, dtype=f32)
     for v in range(v0, v1):
-        for k in range(2):
-            planar = near if k == 0 else far
-            d = near_d if k == 0 else far_d
+        for k, d in enumerate((near_d, far_d)):
             row = planar[v]
             _cross_chords(row[0], row[1], row[2], planar[min(v + d, h - 1)],
                           planar[max(v - d, 0)], v + d < h, v >= d, d, ang, ok, acc, cnt)
+            if two and k == 0:
+                r2 = returned[v]
+                _cross_chords(r2[0], r2[1], r2[2], returned[min(v + d, h - 1)],
+                              returned[max(v - d, 0)], v + d < h, v >= d, d, ang, ok, acc2,
+                              cnt2)
+                _add_into(acc2, cnt2, acc, cnt)
             _mean_degrees(acc, cnt, out[k, v])
 
 
@@ -967,18 +973,20 @@ def _context(zg, ng, big: int, cam: tuple, shift: int = 1, *, growth: tuple,
              near: np.ndarray | None = None) -> tuple:
     """What the measured support's map reads besides its level, on the grid of its choice
     (depth ``zg``, NaN where invalid, normals ``ng``, camera ``cam`` of that grid): the mean
-    angle of the normals :data:`NEAR_SPAN` away (H, W; read in ``near``, the normals the
-    branch returns on that grid, where given) and ``big`` away (1, H, W), each to the right,
-    left, below and above (:func:`_spreads_rows`), :func:`_densities` on every
+    angle of the normals :data:`NEAR_SPAN` away (H, W; where ``near``, the normals the branch
+    returns on that grid, is given, the mean over both fields) and ``big`` away (1, H, W),
+    each to the right, left, below and above (:func:`_spreads_rows`), :func:`_densities` on every
     ``2^shift``-th row and column of that grid, and how far the pixels' planes miss their
     depth at each of :data:`DEPTH_SPANS` (S, H, W) (:func:`_offsets_rows`) with the inverse
     of their frame scales (:func:`_offset_scales`; ``growth = (zref, half)`` as in
     :func:`_support_rows`)."""
     h, w = zg.shape
     planar = np.ascontiguousarray(ng.transpose(0, 2, 1))
-    near_p = planar if near is None else np.ascontiguousarray(near.transpose(0, 2, 1))
+    two = near is not None
+    returned = np.ascontiguousarray(near.transpose(0, 2, 1)) if two else planar
     spreads = np.empty((2, h, w), dtype=np.float32)
-    run_rows(_spreads_rows, h, near_p, planar, NEAR_SPAN, max(1, big), spreads, min_rows=16)
+    run_rows(_spreads_rows, h, planar, returned, two, NEAR_SPAN, max(1, big), spreads,
+             min_rows=16)
     offsets = np.empty((len(DEPTH_SPANS), h, w), dtype=np.float32)
     run_rows(_offsets_rows, h, zg, planar, DEPTH_SPANS, tuple(float(x) for x in cam), offsets,
              min_rows=16)
@@ -1199,7 +1207,7 @@ def _support_branch(z, cam, sigma, prof):
     # the far spread and the offsets read the choice before the fallback: a pixel whose
     # window was right reads as it did; the ones that fell back (deviation past ``limit``, as
     # the branch decided it) read FALLBACK_SCALE times their map (_support_rows); the near
-    # spread reads the normals returned (module doc)
+    # spread reads both the choice and the normals returned (module doc)
     score, _, chosen, dev, limit, halved = scores
     e_i = _interior_error(out, z, score, prof)
     zref = prof.depth if prof.depth == prof.depth else 1.0
