@@ -398,18 +398,15 @@ def _mean_finite(angles):
     return np.where(c > 0, np.nansum(a, 0) / np.maximum(c, 1), 0.0)
 
 
-@pytest.mark.parametrize("kernel", ["fit-error", "box-fit", "support", "support-bands",
-                                    "support-two"])
+@pytest.mark.parametrize("kernel", ["fit-error", "box-fit", "support", "support-bands"])
 def test_spreads_match_numpy_in_any_bands(kernel):
     """The spreads of the noisy maps equal a numpy reference, in one band of rows or two: the
     plane-fit error kernel's (:func:`_fit_error_rows` with ``near_d`` 0: the four neighbours,
     ``R`` to the right and below), the box-fit map's (``near_d`` :data:`NEAR_SPAN`: the four
     pixels that far, ``R`` to the right and below) and the measured support's
     (:func:`_spreads_rows`: the four pixels :data:`NEAR_SPAN` away and the four ``R`` away,
-    right, left, below and above; with ``support-two`` the near spread the mean of the eight
-    angles read in two fields of normals, the far one in the first, as the map reads the
-    choice and the normals returned near and the choice far). A one-sided spread, a neighbour
-    distance of 1 where 3 is meant or a spread read in the wrong field fails it."""
+    right, left, below and above). A one-sided spread or a neighbour distance of 1 where 3 is
+    meant fails it."""
     from depthnormals.ddm import uncertainty as U
 
     rng = np.random.default_rng(3)
@@ -418,9 +415,8 @@ def test_spreads_match_numpy_in_any_bands(kernel):
     n[rng.random((41, 53)) < 0.1] = np.nan
     big = 6
 
-    def cross(d, *fields):
-        return _mean_finite([_angle_ref(f, dv, du) for f in (fields or (n,))
-                             for dv, du in ((-d, 0), (d, 0), (0, -d), (0, d))])
+    def cross(d):
+        return _mean_finite([_angle_ref(n, dv, du) for dv, du in ((-d, 0), (d, 0), (0, -d), (0, d))])
 
     assert U.NEAR_SPAN == 3
     out = np.empty((2, 41, 53), dtype=np.float32)
@@ -439,18 +435,10 @@ def test_spreads_match_numpy_in_any_bands(kernel):
                                                           0.0, 1.0), (40.0, 40.0, 26.0, 20.0),
                               np.empty((41, 53), np.float32), out, big, box)
     else:
-        two = kernel == "support-two"
-        m = n
-        if two:  # the returned field: another one, with the same holes and more
-            m = rng.standard_normal((41, 53, 3)).astype(np.float32)
-            m /= np.linalg.norm(m, axis=2, keepdims=True)
-            m[np.isnan(n[..., 0]) | (rng.random((41, 53)) < 0.1)] = np.nan
-        s1 = cross(U.NEAR_SPAN, n, m) if two else cross(U.NEAR_SPAN)
-        sr = cross(big)
+        s1, sr = cross(U.NEAR_SPAN), cross(big)
         planar = np.ascontiguousarray(n.transpose(0, 2, 1))  # (H, 3, W)
-        returned = np.ascontiguousarray(m.transpose(0, 2, 1))
         for v0, v1 in bands:
-            U._spreads_rows(v0, v1, planar, returned, two, U.NEAR_SPAN, big, out)
+            U._spreads_rows(v0, v1, planar, U.NEAR_SPAN, big, out)
     ok = np.isfinite(n[..., 0])
     np.testing.assert_allclose(out[0][ok], s1[ok], atol=2e-4)
     np.testing.assert_allclose(out[1][ok], sr[ok], atol=2e-4)
@@ -648,50 +636,30 @@ def _kinect_like_kerb(seed, shape=(240, 320), kerb=2.0, road=1.2, top=1.05):
     return d, K, g, riser
 
 
-def test_support_map_reads_the_returned_normals_near(monkeypatch):
-    """The measured support's near spread reads the normals the branch returns (on the map's
-    grid) beside the choice, the far spread and the offsets the choice before the fallback
-    alone: on a Kinect-like kerb the riser's pixels fall back, and the map gets those normals
-    as ``near`` (None on a plane where none falls back). The rows of the riser by its two
-    creases, which keep the road's normal and err 73-88 deg (seeds 0-3), read 1.26x the map
-    of the choice alone on average (4.3 / 4.3 / 6.1 / 4.6 deg against 3.3 / 3.1 / 6.1 / 3.5,
-    session 20): still far below their error, which no spread sees (docs/benchmarks.md 17)."""
-    from depthnormals.ddm import uncertainty as U
-
-    seen = []
-    orig = U._context
-
-    def spy(*args, near=None, **kw):
-        seen.append(near)
-        return orig(*args, near=near, **kw)
-
-    monkeypatch.setattr(U, "_context", spy)
-    ratios = []
+def test_support_map_misses_a_risers_margins():
+    """A known weakness, pinned (session 20; update it when the map or the normals improve
+    there): on a Kinect-like kerb the riser (22 rows at 2 m) falls back to small windows in
+    its middle, but its outer 4 rows by each crease keep the road's or the kerb top's normal
+    and err 73 / 75 / 88 / 79 deg (seeds 0-3) while the map reads 3.3 / 3.1 / 6.1 / 3.5 deg:
+    the choice is one face there and no spread sees it (the synthetic kinect_v1 column's
+    misses, docs/benchmarks.md 17, "Session 20"; reading the near spread on the normals
+    returned as well lifted these rows only to 4.3-6.1 deg). The middle rows, which fell
+    back, err 9-16 deg and read 15-21."""
     for seed in range(4):
         d, K, g, riser = _kinect_like_kerb(seed)
         assert dn.noise_profile(d, K).branch == "measured-support"
         n, u = dn.estimate_normals(d, K, return_uncertainty=True)
-        near = seen[-1]
-        assert near is not None
-        np.testing.assert_array_equal(near, n[::2, ::2])  # the half grid's returned normals
-        monkeypatch.setattr(U, "_context", lambda *a, near=None, **kw: orig(*a, **kw))
-        n0, u0 = dn.estimate_normals(d, K, return_uncertainty=True)
-        monkeypatch.setattr(U, "_context", spy)
-        np.testing.assert_array_equal(n0, n)
+        err = dn.angular_error(n, g)
         rows = np.nonzero(riser[:, 0])[0]
+        assert 20 <= rows.size <= 24
         margins = np.zeros(riser.shape, bool)
         margins[rows[:4]] = margins[rows[-4:]] = True
-        err = dn.angular_error(n, g)
+        middle = np.zeros(riser.shape, bool)
+        middle[rows[6]:rows[-6]] = True
         assert np.nanmean(err[margins]) > 60.0
-        ratios.append(np.nanmean(u[margins]) / np.nanmean(u0[margins]))
-    assert np.mean(ratios) > 1.15, ratios
-    assert min(ratios) >= 0.99, ratios
-    seen.clear()
-    r, d = _plane(0.1)
-    dq = _kinect_like_depth(r.depth, 0).astype(np.float32)
-    assert dn.noise_profile(dq, r.K).branch == "measured-support"
-    dn.estimate_normals(dq, r.K, return_uncertainty=True)
-    assert seen and seen[-1] is None
+        assert np.nanmean(u[margins]) < 8.0
+        assert np.nanmean(err[middle]) < 25.0
+        assert np.nanmean(u[middle]) > 10.0
 
 
 def test_offset_scales_read_the_percentile_over_the_growth():
@@ -790,9 +758,7 @@ def test_real_frame_held_out(shared_data):
     split of the map's constants) on its plane references: Spearman 0.565, mean predicted
     4.74 against 5.25 deg observed (the former map: Spearman 0.39 over the folder's two
     frames, docs/benchmarks.md 17); since session 16's fallback of narrow faces 0.553, 4.96
-    against 4.47 (the normals err less, the map reads the choice before the fallback); since
-    session 20's near spread on the choice and the normals returned 0.548, 5.28 against 4.47
-    (on the normals returned alone 0.534, docs/benchmarks.md 17)."""
+    against 4.47 (the normals err less, the map reads the choice before the fallback)."""
     from depthnormals.evaluate import plane_reference, sensor_threshold
 
     f = next(iter(dn.datasets.open(shared_data / "real-sensors" / "tum_fr2_kinect1_slambook")))
@@ -805,7 +771,7 @@ def test_real_frame_held_out(shared_data):
     m = (ref.interior | ref.rim) & np.isfinite(err) & np.isfinite(u)
     p, o = u[m].astype(np.float64), err[m].astype(np.float64)
     rank = np.corrcoef(np.argsort(np.argsort(p)), np.argsort(np.argsort(o)))[0, 1]
-    assert rank >= 0.54, rank
+    assert rank >= 0.55, rank
     assert abs(p.mean() - o.mean()) <= 0.25 * o.mean(), (p.mean(), o.mean())
 
 

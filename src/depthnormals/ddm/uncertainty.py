@@ -60,15 +60,10 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
   away, on both sides and in opposite directions, against the frame's own tail of that
   reading (:func:`_offsets_rows`, :func:`_offset_scales`, :data:`DEPTH_RAMP`, sessions
   14-15): a face narrower than the windows (a kerb's riser, a pole) takes the normal of the
-  face beside it, coherently, so no spread sees it, but its depth does; the level, the far
-  spread and the offsets read on the branch's choice before its fallback to small windows
-  (session 16, :func:`depthnormals.ddm.support._fallback_rows`), the pixels that fell back at
-  :data:`FALLBACK_SCALE` times their map, and the near spread on both the choice and the
-  normals the branch returns, the mean of the eight angles (session 20): where a narrow face
-  fell back, its strip of returned normals lies a few cells from pixels of that face that
-  kept the neighbour face's normal (within about 6 pixels of the true crease, erring up to 90
-  deg), which the choice, one face throughout, hides; read on the returned normals alone
-  the real frames' sporadic fallbacks raise their correct neighbours (docs/benchmarks.md 17);
+  face beside it, coherently, so no spread sees it, but its depth does; all of it read on the
+  branch's choice before its fallback to small windows (session 16,
+  :func:`depthnormals.ddm.support._fallback_rows`), the pixels that fell back at
+  :data:`FALLBACK_SCALE` times their map;
 - **clean depth** (the plane hypotheses): the float rounding of the one-pixel stencils
   (``sigma / sqrt(6)``) plus, where the pixel's normal agrees with none of its four neighbours'
   (a facet narrower than two pixels: no one-sided stencil fits), the least angle between them.
@@ -212,8 +207,7 @@ DEPTH_FULL = 0.5
 #: seeds 0-4 (was 9/7/10/9/8), the real folders 42 of 60 (was 49), the map past 1.3x.
 FALLBACK_SCALE = 0.8
 #: The near spread ``s_N`` of both noisy maps: cells of the map's grid (the box-fit's is
-#: the pixel grid; the measured support's is mostly the half grid, 6 pixels; there it reads
-#: both the choice and the normals returned, after the fallback).
+#: the pixel grid; the measured support's is mostly the half grid, 6 pixels).
 NEAR_SPAN = 3
 SPREAD_LEVEL = 0.1
 LEVEL_FLOOR = 0.5
@@ -790,34 +784,24 @@ def _add_into(a, k, out_a, out_k):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _spreads_rows(v0, v1, planar, returned, two, near_d, far_d, out):
+def _spreads_rows(v0, v1, planar, near_d, far_d, out):
     """Rows ``[v0, v1)``: the mean angle (degrees) between the pixel's normal and the finite
     normals ``near_d`` away to the right, left, below and above (``out[0]``), and the same
-    ``far_d`` away (``out[1]``), 0 without one, read in ``planar``; with ``two``, the near
-    spread is the mean over both fields, ``planar``'s four angles and ``returned``'s (normals of
-    the same grid). ``planar``, ``returned``: normals by row (H, 3, W), so that a row's three
-    components are one C-contiguous block (a (3, W) slice of (3, H, W) is strided, and the
-    loops reading it ran scalar, 5x slower). Every loop runs along a row over contiguous
-    memory."""
+    ``far_d`` away (``out[1]``), 0 without one. ``planar``: the normals by row (H, 3, W), so
+    that a row's three components are one C-contiguous block (a (3, W) slice of (3, H, W) is
+    strided, and the loops reading it ran scalar, 5x slower). Every loop runs along a row
+    over contiguous memory."""
     h, w = planar.shape[0], planar.shape[2]
     f32 = np.float32
     ang = np.zeros(w, dtype=f32)
     ok = np.zeros(w, dtype=f32)
     acc = np.empty(w, dtype=f32)
     cnt = np.empty(w, dtype=f32)
-    acc2 = np.empty(w, dtype=f32)
-    cnt2 = np.empty(w, dtype=f32)
     for v in range(v0, v1):
+        row = planar[v]
         for k, d in enumerate((near_d, far_d)):
-            row = planar[v]
             _cross_chords(row[0], row[1], row[2], planar[min(v + d, h - 1)],
                           planar[max(v - d, 0)], v + d < h, v >= d, d, ang, ok, acc, cnt)
-            if two and k == 0:
-                r2 = returned[v]
-                _cross_chords(r2[0], r2[1], r2[2], returned[min(v + d, h - 1)],
-                              returned[max(v - d, 0)], v + d < h, v >= d, d, ang, ok, acc2,
-                              cnt2)
-                _add_into(acc2, cnt2, acc, cnt)
             _mean_degrees(acc, cnt, out[k, v])
 
 
@@ -969,24 +953,19 @@ def _box_row(ii, v, r, lo, hi, inv, out):
         out[u] = (rb[d] - ra[d] - rb[c] + ra[c]) * (iv * inv[u])
 
 
-def _context(zg, ng, big: int, cam: tuple, shift: int = 1, *, growth: tuple,
-             near: np.ndarray | None = None) -> tuple:
+def _context(zg, ng, big: int, cam: tuple, shift: int = 1, *, growth: tuple) -> tuple:
     """What the measured support's map reads besides its level, on the grid of its choice
     (depth ``zg``, NaN where invalid, normals ``ng``, camera ``cam`` of that grid): the mean
-    angle of the normals :data:`NEAR_SPAN` away (H, W; where ``near``, the normals the branch
-    returns on that grid, is given, the mean over both fields) and ``big`` away (1, H, W),
-    each to the right, left, below and above (:func:`_spreads_rows`), :func:`_densities` on every
+    angle of the normals :data:`NEAR_SPAN` away (H, W) and ``big`` away (1, H, W), each to
+    the right, left, below and above (:func:`_spreads_rows`), :func:`_densities` on every
     ``2^shift``-th row and column of that grid, and how far the pixels' planes miss their
     depth at each of :data:`DEPTH_SPANS` (S, H, W) (:func:`_offsets_rows`) with the inverse
     of their frame scales (:func:`_offset_scales`; ``growth = (zref, half)`` as in
     :func:`_support_rows`)."""
     h, w = zg.shape
     planar = np.ascontiguousarray(ng.transpose(0, 2, 1))
-    two = near is not None
-    returned = np.ascontiguousarray(near.transpose(0, 2, 1)) if two else planar
     spreads = np.empty((2, h, w), dtype=np.float32)
-    run_rows(_spreads_rows, h, planar, returned, two, NEAR_SPAN, max(1, big), spreads,
-             min_rows=16)
+    run_rows(_spreads_rows, h, planar, NEAR_SPAN, max(1, big), spreads, min_rows=16)
     offsets = np.empty((len(DEPTH_SPANS), h, w), dtype=np.float32)
     run_rows(_offsets_rows, h, zg, planar, DEPTH_SPANS, tuple(float(x) for x in cam), offsets,
              min_rows=16)
@@ -1204,10 +1183,9 @@ def _support_branch(z, cam, sigma, prof):
     fx, fy, cx, cy = cam
     scores: list = []
     out = support_select(z, fx, fy, cx, cy, sigma, profile=prof, out_scores=scores)
-    # the far spread and the offsets read the choice before the fallback: a pixel whose
-    # window was right reads as it did; the ones that fell back (deviation past ``limit``, as
-    # the branch decided it) read FALLBACK_SCALE times their map (_support_rows); the near
-    # spread reads both the choice and the normals returned (module doc)
+    # the spreads and offsets read the choice before the fallback: a pixel whose window was
+    # right reads as it did; the ones that fell back (deviation past ``limit``, as the branch
+    # decided it) read FALLBACK_SCALE times their map (_support_rows)
     score, _, chosen, dev, limit, halved = scores
     e_i = _interior_error(out, z, score, prof)
     zref = prof.depth if prof.depth == prof.depth else 1.0
@@ -1220,9 +1198,7 @@ def _support_branch(z, cam, sigma, prof):
         cam_g, big_g, rows = (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy), big // 2, 8
     else:
         zg, cam_g, big_g, rows = z, cam, big, 16
-    # the normals returned on that grid (the choice itself where no pixel fell back)
-    near = (out[::2, ::2] if halved else out) if bool((dev > limit).any()) else None
-    ctx = (*_context(zg, chosen, big_g, cam_g, growth=model[1:], near=near), dev, limit)
+    ctx = (*_context(zg, chosen, big_g, cam_g, growth=model[1:]), dev, limit)
     grid = np.empty(zg.shape, dtype=np.float32)  # (a half-grid cell of invalid depth: e_i)
     run_rows(_support_rows, zg.shape[0], zg, chosen, model, ctx, grid, min_rows=rows)
     if not halved:
