@@ -333,10 +333,54 @@ def _radius_stats(rows: np.ndarray, ok: np.ndarray) -> tuple:
     """Per frame (rows (B, P, 3) of one radius, present where ``ok``): the number of pairs,
     the measured mean error of one fit (:data:`PAIR_TO_ERROR` times the median angle of the
     pairs whose larger residual is at most the median one: edges drop out), the median
-    residual of those, and which they are (B, P)."""
-    ang, res = rows[..., 0], rows[..., 1]
-    keep = ok & (res <= _row_medians(res, ok)[:, None])
-    return ok.sum(axis=1), PAIR_TO_ERROR * _row_medians(ang, keep), _row_medians(res, keep), keep
+    residual of those, and which they are (B, P). Compiled (:func:`_radius_stats_rows`): the
+    tables hold a few hundred pairs, where numpy's per-call cost was most of the support
+    profile's time (1.1 of 1.3 ms at 640x480, eight radii)."""
+    n, ang, res, keep = _radius_stats_rows(np.asarray(rows), np.asarray(ok, dtype=np.bool_))
+    return n, PAIR_TO_ERROR * ang, res, keep
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _median_of(x, ok, buf):
+    """``np.median`` of the entries of ``x`` (P,) where ``ok`` (NaN where there is none): the
+    middle one of the sorted entries, or the mean of the two middle ones (``buf``: scratch of
+    P; the others read as infinite, so that a NaN entry sorts after them, as numpy sorts)."""
+    m = x.size
+    k = 0
+    for i in range(m):
+        buf[i] = x[i] if ok[i] else np.inf
+        k += 1 if ok[i] else 0
+    if k == 0:
+        return np.nan
+    srt = np.sort(buf[:m])  # (NaN last, after the infinities, as numpy sorts)
+    lo = srt[(k - 1) // 2]
+    hi = srt[min(k // 2, m - 1)]
+    return hi if k % 2 == 1 else (lo + hi) / 2  # (in the dtype of x, as numpy's mean)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _radius_stats_rows(rows, ok):
+    """:func:`_radius_stats` before the error's factor: per frame the number of pairs, the
+    median angle and the median residual of the kept pairs, and the kept pairs."""
+    b, m = ok.shape
+    n = np.zeros(b, dtype=np.int64)
+    ang = np.empty(b, dtype=rows.dtype)
+    res = np.empty(b, dtype=rows.dtype)
+    keep = np.zeros((b, m), dtype=np.bool_)
+    buf = np.empty(max(m, 1), dtype=rows.dtype)
+    for f in range(b):
+        r = rows[f, :, 1]
+        o = ok[f]
+        c = 0
+        for i in range(m):
+            c += 1 if o[i] else 0
+        n[f] = c
+        med = _median_of(r, o, buf)
+        for i in range(m):
+            keep[f, i] = o[i] and r[i] <= med
+        ang[f] = _median_of(rows[f, :, 0], keep[f], buf)
+        res[f] = _median_of(r, keep[f], buf)
+    return n, ang, res, keep
 
 
 def _choose_profile(stats, sigma: float, target: float) -> SupportProfile:
@@ -363,20 +407,6 @@ def _choose_profile(stats, sigma: float, target: float) -> SupportProfile:
     zref, gamma = depth_exponent(kept[i][:, 1], kept[i][:, 2])
     return SupportProfile(tuple(radii), tuple(errors), tuple(residuals), radii[i], zref, gamma,
                           tuple(meas), tuple(pred))
-
-
-def _row_medians(x: np.ndarray, ok: np.ndarray) -> np.ndarray:
-    """``np.median`` of each row's entries where ``ok`` (NaN where there is none), as numpy
-    computes it: the middle one of the sorted entries, or the mean of the two middle ones."""
-    if x.shape[1] == 0:  # no pair at all (an image smaller than the windows)
-        return np.full(x.shape[0], np.nan)
-    srt = np.sort(np.where(ok, x, np.inf), axis=1)
-    n = ok.sum(axis=1)
-    i = np.arange(x.shape[0])
-    lo = srt[i, np.clip((n - 1) // 2, 0, None)]
-    hi = srt[i, np.clip(n // 2, 0, x.shape[1] - 1)]
-    med = np.where(n % 2 == 1, hi, np.mean(np.stack([lo, hi]), axis=0))
-    return np.where(n > 0, med, np.nan)
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
