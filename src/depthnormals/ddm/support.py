@@ -352,10 +352,12 @@ def _median_of(x, ok, buf):
         k += 1 if ok[i] else 0
     if k == 0:
         return np.nan
-    srt = np.sort(buf[:m])  # (NaN last, after the infinities, as numpy sorts)
+    srt = buf[:m]
+    srt.sort()  # in place, the scratch's (NaN last, after the infinities, as numpy sorts)
     lo = srt[(k - 1) // 2]
     hi = srt[min(k // 2, m - 1)]
-    return hi if k % 2 == 1 else (lo + hi) / 2  # (in the dtype of x, as numpy's mean)
+    # (the sum in the dtype of x, as numpy's mean; halving it is exact in any float dtype)
+    return hi if k % 2 == 1 else (lo + hi) / 2
 
 
 @nb.njit(cache=True, error_model="numpy")
