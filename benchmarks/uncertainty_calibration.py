@@ -38,12 +38,16 @@ Columns:
 
     python benchmarks/uncertainty_calibration.py [--method 3f2n+] [--synth /tmp/u-synth]
         [--real ../shared/data/real-sensors] [--planes] [--min-fraction F] [--creases] [--json OUT]
-        [--figure PNG] [--bootstrap N] [--speed]
+        [--figure PNG] [--bootstrap N] [--leave-one-out] [--speed]
 
 ``--bootstrap N``: each column's frames resampled N times with replacement; per decile bin the
 5-95 % range of observed / predicted and the share of resamples in which it passes, and the
 share in which every bin passes (how far a column of a few frames reads its objects rather
 than the map).
+
+``--leave-one-out``: each column binned again without each of its frames in turn: the bins
+that pass per frame left out, and the frames without which every bin passes (a failing decile
+that hangs on one frame's objects).
 
 ``--speed``: instead, the single-thread time of ``method`` with and without the map on every
 real frame and one frame per synthetic variant (median of 7, interleaved per frame), and the
@@ -121,6 +125,40 @@ def reliability(pred: np.ndarray, obs: np.ndarray, bins: int = BINS) -> list[dic
     return out
 
 
+class _Frames:
+    """Each frame's predictions sorted, with running sums of them and of their observations:
+    any selection of the frames (repeats allowed) is binned by deciles of its pooled
+    prediction without pooling it (:meth:`bins`)."""
+
+    def __init__(self, pred: list[np.ndarray], obs: list[np.ndarray]) -> None:
+        order = [np.argsort(p, kind="stable") for p in pred]
+        self.ps = [p[o] for p, o in zip(pred, order, strict=True)]
+        self.cp = [np.concatenate(([0.0], np.cumsum(p))) for p in self.ps]
+        self.co = [np.concatenate(([0.0], np.cumsum(o[k]))) for o, k in zip(obs, order, strict=True)]
+
+    def bins(self, pick, bins: int = BINS):
+        """``(mean predicted, mean observed, pixels)`` per decile bin of the frames ``pick``
+        (edges at the selection's rank quantiles, as :func:`reliability` splits), or None
+        with fewer pixels than bins."""
+        allp = np.concatenate([self.ps[j] for j in pick])
+        n = allp.size
+        if n < bins:
+            return None
+        ranks = [n * k // bins for k in range(1, bins)]
+        edges = np.partition(allp, ranks)[ranks]
+        sp = np.zeros(bins)
+        so = np.zeros(bins)
+        cnt = np.zeros(bins)
+        for j in pick:
+            cut = np.concatenate(([0], np.searchsorted(self.ps[j], edges, side="left"),
+                                  [self.ps[j].size]))
+            sp += np.diff(self.cp[j][cut])
+            so += np.diff(self.co[j][cut])
+            cnt += np.diff(cut)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return sp / cnt, so / cnt, cnt
+
+
 def bootstrap_bins(pred: list[np.ndarray], obs: list[np.ndarray], reps: int, seed: int,
                    bins: int = BINS) -> dict:
     """The decile table's spread over the frames: ``reps`` resamples of the frames (with
@@ -129,37 +167,41 @@ def bootstrap_bins(pred: list[np.ndarray], obs: list[np.ndarray], reps: int, see
     and the share of resamples it passes in, and the share in which every bin passes. A
     column of a few frames is binned over a few objects: one narrow face or shelf moves a
     decile by half (docs/benchmarks.md section 17)."""
-    order = [np.argsort(p, kind="stable") for p in pred]
-    ps = [p[o] for p, o in zip(pred, order, strict=True)]
-    cp = [np.concatenate(([0.0], np.cumsum(p))) for p in ps]
-    co = [np.concatenate(([0.0], np.cumsum(o[k]))) for o, k in zip(obs, order, strict=True)]
+    frames = _Frames(pred, obs)
     rng = np.random.default_rng(seed)
     ratios = np.full((reps, bins), np.nan)
     passed = np.zeros((reps, bins), dtype=bool)
     for i in range(reps):
-        pick = rng.integers(0, len(pred), len(pred))
-        allp = np.concatenate([ps[j] for j in pick])
-        n = allp.size
-        if n < bins:
+        got = frames.bins(rng.integers(0, len(pred), len(pred)), bins)
+        if got is None:
             continue
-        ranks = [n * k // bins for k in range(1, bins)]
-        edges = np.partition(allp, ranks)[ranks]
-        sp = np.zeros(bins)
-        so = np.zeros(bins)
-        cnt = np.zeros(bins)
-        for j in pick:
-            cut = np.concatenate(([0], np.searchsorted(ps[j], edges, side="left"), [ps[j].size]))
-            sp += np.diff(cp[j][cut])
-            so += np.diff(co[j][cut])
-            cnt += np.diff(cut)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            mp, mo = sp / cnt, so / cnt
+        mp, mo, cnt = got
         ratios[i] = mo / mp
         passed[i] = passes(mp, mo) & (cnt > 0)
     return {"reps": reps, "ratio_p5": np.nanpercentile(ratios, 5, axis=0).tolist(),
             "ratio_p95": np.nanpercentile(ratios, 95, axis=0).tolist(),
             "bin_pass_share": passed.mean(axis=0).tolist(),
             "all_pass_share": float(passed.all(axis=1).mean())}
+
+
+def leave_one_out(pred: list[np.ndarray], obs: list[np.ndarray], names: list[str],
+                  bins: int = BINS) -> dict:
+    """The decile table without each frame in turn: per frame left out, the bins that pass
+    and the ratio observed / predicted of every bin; and the frames without which every bin
+    passes (where a column's failing decile hangs on one frame's objects, such as one narrow
+    face the depth cannot resolve: docs/benchmarks.md section 17, "Session 21")."""
+    frames = _Frames(pred, obs)
+    rows = []
+    for i, name in enumerate(names):
+        got = frames.bins([j for j in range(len(pred)) if j != i], bins)
+        if got is None:
+            continue
+        mp, mo, cnt = got
+        ok = passes(mp, mo) & (cnt > 0)
+        rows.append({"left_out": name, "bins_passed": int(ok.sum()),
+                     "ratios": (mo / mp).tolist()})
+    return {"frames": rows,
+            "every_bin_passes_without": [r["left_out"] for r in rows if r["bins_passed"] == bins]}
 
 
 #: Distance bins (px from the crease line) of the crease-band profile (``--creases``).
@@ -197,15 +239,18 @@ class Column:
     def __init__(self) -> None:
         self.pred: list[np.ndarray] = []
         self.obs: list[np.ndarray] = []
+        self.names: list[str] = []
 
-    def add(self, unc: np.ndarray, err: np.ndarray, mask: np.ndarray | None = None) -> None:
+    def add(self, unc: np.ndarray, err: np.ndarray, mask: np.ndarray | None = None,
+            name: str | None = None) -> None:
         ok = np.isfinite(unc) & np.isfinite(err)
         if mask is not None:
             ok &= mask
         self.pred.append(unc[ok].astype(np.float64))
         self.obs.append(err[ok].astype(np.float64))
+        self.names.append(name if name is not None else f"frame {len(self.names)}")
 
-    def summary(self, bootstrap: int = 0, seed: int = 0) -> dict:
+    def summary(self, bootstrap: int = 0, seed: int = 0, loo: bool = False) -> dict:
         p = np.concatenate(self.pred) if self.pred else np.empty(0)
         o = np.concatenate(self.obs) if self.obs else np.empty(0)
         table = reliability(p, o) if p.size >= BINS else []
@@ -215,6 +260,8 @@ class Column:
                "bins_passed": sum(b["pass"] for b in table), "bins": table}
         if bootstrap and table and len(self.pred) > 1:
             out["bootstrap"] = bootstrap_bins(self.pred, self.obs, bootstrap, seed)
+        if loo and table and len(self.pred) > 1:
+            out["leave_one_out"] = leave_one_out(self.pred, self.obs, self.names)
         return out
 
 
@@ -246,7 +293,7 @@ def synth_columns(root: Path, method: str, planes: bool = False, seed: int = 0,
         variant = f.meta.get("variant", f.group.rsplit("/", 1)[-1])
         n, u = dn.estimate_normals(f.depth, f.K, method=method, return_uncertainty=True)
         err = dn.angular_error(n, f.normals)
-        cols.setdefault(f"synth/{variant}", Column()).add(u, err, f.mask)
+        cols.setdefault(f"synth/{variant}", Column()).add(u, err, f.mask, name=f"{f.group}/{f.name}")
         if (planes or profiles is not None) and variant != "clean":
             ref = plane_reference(f.depth, f.K, seed=seed, threshold=sensor_threshold({}))
         if profiles is not None and variant != "clean":
@@ -283,8 +330,9 @@ def real_columns(root: Path, method: str, seed: int, min_fraction: float | None 
         err = dn.angular_error(n, g.astype(np.float32))
         mask = ref.interior | ref.rim
         group = str(f.group).split("/")[0]
-        cols.setdefault(f"real/{group}", Column()).add(u, err, mask)
-        cols["real"].add(u, err, mask)
+        name = f"{f.group}/{f.name}"
+        cols.setdefault(f"real/{group}", Column()).add(u, err, mask, name=name)
+        cols["real"].add(u, err, mask, name=name)
         if creases:
             band = crease_band(f.depth, f.K, ref)
             g[band.mask] = band.normals[band.mask]
@@ -360,6 +408,15 @@ def _print(name: str, s: dict) -> None:
               f"{'yes' if b['pass'] else 'NO ':3s}{more}")
     if bs:
         print(f"  every bin passes in {100 * bs['all_pass_share']:.0f} % of the resamples")
+    lo = s.get("leave_one_out")
+    if lo and lo["frames"]:
+        got = [r["bins_passed"] for r in lo["frames"]]
+        without = lo["every_bin_passes_without"]
+        more = ""
+        if s["bins_passed"] < len(s["bins"]):  # which frames the failing bins hang on
+            more = "; every bin passes without " + (", ".join(without) if without
+                                                     else "none of them alone")
+        print(f"  leaving one of {s['frames']} frames out: {min(got)}-{max(got)} bins pass{more}")
 
 
 def _figure(results: dict, path: Path) -> None:
@@ -416,6 +473,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--bootstrap", type=int, default=0, metavar="N",
                     help="also resample each column's frames N times (with replacement): the "
                          "decile ratios' 5-95 %% range and how often each bin passes")
+    ap.add_argument("--leave-one-out", action="store_true",
+                    help="also bin each column without each of its frames in turn: which frame "
+                         "a failing decile hangs on")
     a = ap.parse_args(argv)
     if a.real and not Path(a.real).is_dir():  # never a silently shorter table
         ap.error(f"--real {a.real}: no such folder (pass --real '' to leave the real frames out)")
@@ -437,7 +497,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.real:
         cols.update(real_columns(Path(a.real), a.method, a.seed, a.min_fraction, a.creases,
                                  profiles))
-    results = {k: c.summary(a.bootstrap, a.seed) for k, c in cols.items()}
+    results = {k: c.summary(a.bootstrap, a.seed, a.leave_one_out) for k, c in cols.items()}
     for k, s in results.items():
         _print(k, s)
     bands = {k: p.rows() for k, p in (profiles or {}).items()}

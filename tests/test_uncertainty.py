@@ -876,6 +876,28 @@ def test_calibration_bench_bootstrap_bins_as_the_table(load_benchmark):
     assert 0.17 <= bs["all_pass_share"] <= 0.33, bs["all_pass_share"]
 
 
+def test_calibration_bench_leave_one_out_names_the_frame_a_bin_hangs_on(load_benchmark):
+    """``--leave-one-out``: the table without each frame in turn, binned as the table bins.
+    Three calibrated frames beside one whose error is 3x its prediction: only the table
+    without that frame passes every bin, and its ratios are the three frames' own (1.0 where
+    they observe exactly their prediction); with it, every decile reads between 1 and 3."""
+    bench = load_benchmark("uncertainty_calibration")
+    rng = np.random.default_rng(2)
+    p = [rng.gamma(1.5, 2.0, 4000) for _ in range(4)]
+    o = [p[0], p[1], 3.0 * p[2], p[3]]
+    got = bench.leave_one_out(p, o, ["a", "b", "c", "d"])
+    assert got["every_bin_passes_without"] == ["c"]
+    rows = {r["left_out"]: r for r in got["frames"]}
+    assert rows["c"]["bins_passed"] == 10
+    np.testing.assert_allclose(rows["c"]["ratios"], 1.0, rtol=1e-12)
+    for k in "abd":
+        assert rows[k]["bins_passed"] < 10
+        assert all(1.0 < r < 3.0 for r in rows[k]["ratios"])
+    # the same binning as the table: the frames but "c" pooled
+    table = bench.reliability(np.concatenate([p[0], p[1], p[3]]), np.concatenate([o[0], o[1], o[3]]))
+    np.testing.assert_allclose(rows["c"]["ratios"], [b["observed"] / b["predicted"] for b in table])
+
+
 def test_calibration_bench_scores_the_crease_bands_on_request(shared_data, load_benchmark):
     """``--creases``: the real columns ``real+creases/<folder>`` hold the plane pixels and the
     crease band (crease_band) that the plane reference leaves out: on TUM fr2 the desk's front
