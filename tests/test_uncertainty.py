@@ -753,6 +753,34 @@ def test_box_fit_ramp_and_high_factor():
     assert np.all(np.diff(r[0]) > 0)  # monotone: the ranking is unchanged
 
 
+def test_box_product_is_linear_in_the_noise_and_weights_the_far_spread():
+    """The box-fit map's product of powers (session 21: exponents (3, 3, 2) eighths of the
+    noise error, the near spread and the spread one large radius away): on a plane, where
+    both spreads are proportional to the noise, the map is proportional to it (the three
+    exponents sum to 8: twice the noise, twice the map); a near spread 4x reads 4^(3/8) = 1.68x,
+    a far one 4x 4^(2/8) = 1.41x (1.19x before session 21: the window one radius away shares
+    no pixel with the pixel's own, so its angle is the realised error, and it ranks the error
+    better). Jumps and steps enter as before."""
+    from depthnormals.ddm import uncertainty as U
+
+    k = U.BOX_POW
+    assert k[0] + k[1] + k[2] == 8 and k[2] > 1
+    e = np.array([0.2, 0.4, 0.2, 0.2, 0.2], np.float32)
+    s1 = np.array([0.3, 0.6, 1.2, 0.3, 0.3], np.float32)
+    s3 = np.array([0.25, 0.5, 0.25, 1.0, 0.25], np.float32)
+    j = np.array([0.0, 0.0, 0.0, 0.0, 0.1], np.float32)
+    st = np.zeros(5, np.float32)
+    out = np.empty(5, np.float32)
+    U._box_product(e, s1, s3, j, st, out)
+    want = (U.BOX_MAP[0] * (1.0 + U.BOX_MAP[1] * j)
+            * (e ** k[0] * s1 ** k[1] * s3 ** k[2] * (U.STEP_OFFSET + st) ** k[3]) ** 0.125)
+    np.testing.assert_allclose(out, want, rtol=1e-5)
+    assert out[1] == pytest.approx(2.0 * out[0], rel=1e-5)  # twice the noise on a plane
+    assert out[2] / out[0] == pytest.approx(4.0 ** (k[1] / 8), rel=1e-5)
+    assert out[3] / out[0] == pytest.approx(4.0 ** (k[2] / 8), rel=1e-5)
+    assert out[3] / out[0] > 1.4  # the far spread at twice its former weight
+
+
 def test_real_frame_held_out(shared_data):
     """A held-out real frame (the first of ``tum_fr2_kinect1_slambook``; not in the training
     split of the map's constants) on its plane references: Spearman 0.565, mean predicted
