@@ -13,7 +13,8 @@ Columns:
 - ``synth/<variant>``: a synthetic benchmark folder (``--synth``, made by ``depthnormals synth
   /tmp/u-synth --indoor 2 --outdoor 2 --views 2 --seed 0 --noise
   gaussian,kinect_v1,kinect_v2,tof,realsense_d4xx --scenes procedural``), one column per sensor
-  model (and ``clean``);
+  model (and ``clean``); with several folders, each column pools all their frames (sets of
+  other seeds: the benchmark at a larger scale);
 - ``real/<folder>``: the real frames of ``../shared/data/real-sensors`` against their plane
   references (``plane_reference`` with ``sensor_threshold``; interiors and rims), and ``real``
   over all of them;
@@ -36,7 +37,7 @@ Columns:
   deg, for the real frames pooled and (with ``--synth``) each noisy sensor column, whose band
   is found on the plane reference of its noisy depth and scored against the exact normals.
 
-    python benchmarks/uncertainty_calibration.py [--method 3f2n+] [--synth /tmp/u-synth]
+    python benchmarks/uncertainty_calibration.py [--method 3f2n+] [--synth /tmp/u-synth ...]
         [--real ../shared/data/real-sensors] [--planes] [--min-fraction F] [--creases] [--json OUT]
         [--figure PNG] [--bootstrap N] [--leave-one-out] [--speed]
 
@@ -279,21 +280,24 @@ def analytic_columns(method: str, noise: float, seed: int) -> dict[str, Column]:
     return {"analytic": col}
 
 
-def synth_columns(root: Path, method: str, planes: bool = False, seed: int = 0,
+def synth_columns(root: Path | list[Path], method: str, planes: bool = False, seed: int = 0,
                   profiles: dict[str, BandProfile] | None = None) -> dict[str, Column]:
-    """One column per sensor model of the synthetic folder ``root``; with ``planes`` also
+    """One column per sensor model of the synthetic folder ``root`` (several: their frames
+    pooled, each named by its folder); with ``planes`` also
     its pixels on and off the plane reference of the noisy depth (module doc); with
     ``profiles`` (a dict), the crease-band profile of each noisy model, the band found on the
     noisy depth's plane reference and scored against the exact normals."""
     from depthnormals.datasets.synthetic import read_synthetic
     from depthnormals.evaluate import crease_band, plane_reference, sensor_threshold
 
+    roots = [root] if isinstance(root, Path) else list(root)
     cols: dict[str, Column] = {}
-    for f in read_synthetic(root):
+    for folder, f in ((r, f) for r in roots for f in read_synthetic(r)):
         variant = f.meta.get("variant", f.group.rsplit("/", 1)[-1])
         n, u = dn.estimate_normals(f.depth, f.K, method=method, return_uncertainty=True)
         err = dn.angular_error(n, f.normals)
-        cols.setdefault(f"synth/{variant}", Column()).add(u, err, f.mask, name=f"{f.group}/{f.name}")
+        name = f"{f.group}/{f.name}" if len(roots) == 1 else f"{folder.name}/{f.group}/{f.name}"
+        cols.setdefault(f"synth/{variant}", Column()).add(u, err, f.mask, name=name)
         if (planes or profiles is not None) and variant != "clean":
             ref = plane_reference(f.depth, f.K, seed=seed, threshold=sensor_threshold({}))
         if profiles is not None and variant != "clean":
@@ -456,7 +460,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--method", default="3f2n+")
     ap.add_argument("--noise", type=float, default=0.1, help="analytic scenes' noise (footprints)")
-    ap.add_argument("--synth", type=Path, default=None, help="synthetic benchmark folder")
+    ap.add_argument("--synth", type=Path, nargs="+", default=None,
+                    help="synthetic benchmark folder (several: one column per sensor model over "
+                         "all their frames)")
     ap.add_argument("--real", default=str(ROOT), help="real-sensor folder ('' to skip)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, default=None)
@@ -479,15 +485,16 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     if a.real and not Path(a.real).is_dir():  # never a silently shorter table
         ap.error(f"--real {a.real}: no such folder (pass --real '' to leave the real frames out)")
-    if a.synth is not None and not a.synth.is_dir():
-        ap.error(f"--synth {a.synth}: no such folder")
+    for d in a.synth or ():
+        if not d.is_dir():
+            ap.error(f"--synth {d}: no such folder")
     if a.min_fraction is not None and not 1e-6 <= a.min_fraction <= 1.0:  # before any column
         ap.error(f"--min-fraction {a.min_fraction}: must be in [1e-06, 1] (plane_reference's "
                  "min_fraction, a share of the image)")
     if not 0 <= a.bootstrap <= 100_000:
         ap.error(f"--bootstrap {a.bootstrap}: must be in [0, 100000] (0: no resampling)")
     if a.speed:
-        speed(a.method, a.synth, a.real)
+        speed(a.method, a.synth[0] if a.synth else None, a.real)
         return 0
     cols = analytic_columns(a.method, a.noise, a.seed)
     profiles: dict[str, BandProfile] | None = {} if a.creases else None
@@ -520,7 +527,8 @@ def main(argv: list[str] | None = None) -> int:
         from depthnormals.io import write_bytes_atomic
 
         write_bytes_atomic(a.json, json.dumps({"method": a.method, "noise": a.noise,
-                                               "seed": a.seed, "synth": str(a.synth),
+                                               "seed": a.seed,
+                                               "synth": [str(d) for d in a.synth or ()],
                                                "real": str(a.real), "columns": results,
                                                "crease_profiles": bands},
                                               indent=1).encode())

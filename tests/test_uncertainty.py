@@ -825,8 +825,31 @@ def test_calibration_bench_splits_synthetic_on_and_off_planes(tmp_path, load_ben
              ("synth-planes/kinect_v1", "synth-off/kinect_v1"))] == [True] * 3
 
 
+def test_calibration_bench_pools_several_synthetic_folders(tmp_path, load_benchmark):
+    """``--synth A B``: each sensor column holds the frames of both folders, its pixels
+    exactly the sum of the two folders' (none lost or counted twice), the frames named by
+    their folder (leave-one-out must say which set's frame a bin hangs on)."""
+    from depthnormals.camera import Intrinsics
+    from depthnormals.synth import generate
+
+    roots = [tmp_path / "a", tmp_path / "b"]
+    for seed, root in enumerate(roots):
+        generate(root, indoor=1, outdoor=0, views=1, seed=seed, K=Intrinsics(91.375, 91.375, 63.5, 52.5),
+                 size=(106, 128), progress=False, noise=("kinect_v1",))
+    bench = load_benchmark("uncertainty_calibration")
+    alone = [bench.synth_columns(r, "3f2n+")["synth/kinect_v1"] for r in roots]
+    both = bench.synth_columns(roots, "3f2n+")["synth/kinect_v1"]
+    assert both.summary()["frames"] == 2
+    assert both.summary()["pixels"] == sum(c.summary()["pixels"] for c in alone) > 0
+    assert [n.split("/")[0] for n in both.names] == ["a", "b"]
+    assert alone[0].names[0] == both.names[0].split("/", 1)[1]
+    np.testing.assert_array_equal(np.concatenate(both.pred),
+                                  np.concatenate([alone[0].pred[0], alone[1].pred[0]]))
+
+
 @pytest.mark.parametrize("argv", [["--real", "no-such-folder"],
-                                  ["--real", "", "--synth", "no-such-folder"]])
+                                  ["--real", "", "--synth", "no-such-folder"],
+                                  ["--real", "", "--synth", ".", "no-such-folder"]])
 def test_calibration_bench_refuses_a_missing_folder(tmp_path, monkeypatch, load_benchmark, capsys,
                                                      argv):
     """A mistyped ``--real`` or ``--synth`` is an error naming the folder, not a table with
