@@ -204,10 +204,10 @@ def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
         exactly where the normal is NaN; :mod:`depthnormals.ddm.uncertainty`): for
         ``"3f2n+"`` (default options, every branch), ``"fals"`` and PCL's four modes; any
         other method raises ValueError. A stack gives one map per frame, (N, H, W), each
-        equal to the frame's single call. Calibrated on planar and creased scenes (every
-        decile within 25 % on the synthetic sensor models and the real frames' planes); in
+        equal to the frame's single call. Calibrated on the procedural synthetic scenes (at 80
+        frames a sensor model, every decile within 25 %) and on the real frames' planes; in
         clutter narrower than the estimator's windows (shelves of books) it reads low, by
-        about 1.4x (docs/benchmarks.md, section 17).
+        1.3-1.8x (docs/benchmarks.md, section 17).
     **options
         Keyword options of the chosen estimator (and, for ``"<name>+"``, of
         :func:`depthnormals.ddm.discontinuity_discrimination`). Unknown names raise TypeError.
