@@ -39,7 +39,7 @@ Columns:
 
     python benchmarks/uncertainty_calibration.py [--method 3f2n+] [--synth /tmp/u-synth ...]
         [--real ../shared/data/real-sensors] [--planes] [--min-fraction F] [--creases] [--json OUT]
-        [--figure PNG] [--bootstrap N] [--leave-one-out] [--speed]
+        [--figure PNG] [--bootstrap N] [--leave-one-out] [--frames N] [--speed]
 
 ``--bootstrap N``: each column's frames resampled N times with replacement; per decile bin the
 5-95 % range of observed / predicted and the share of resamples in which it passes, and the
@@ -49,6 +49,11 @@ than the map).
 ``--leave-one-out``: each column binned again without each of its frames in turn: the bins
 that pass per frame left out, and the frames without which every bin passes (a failing decile
 that hangs on one frame's objects).
+
+``--frames N``: for each column with a failing bin, the N frames that carry most of the excess
+in its failing bins (observed minus predicted, signed as each bin fails), with their share of it
+and their own observed / predicted there: where the leave-one-out finds no single frame, which
+scenes the miss is made of.
 
 ``--speed``: instead, the single-thread time of ``method`` with and without the map on every
 real frame and one frame per synthetic variant (median of 7, interleaved per frame), and the
@@ -137,25 +142,37 @@ class _Frames:
         self.cp = [np.concatenate(([0.0], np.cumsum(p))) for p in self.ps]
         self.co = [np.concatenate(([0.0], np.cumsum(o[k]))) for o, k in zip(obs, order, strict=True)]
 
-    def bins(self, pick, bins: int = BINS):
-        """``(mean predicted, mean observed, pixels)`` per decile bin of the frames ``pick``
-        (edges at the selection's rank quantiles, as :func:`reliability` splits), or None
-        with fewer pixels than bins."""
+    def edges(self, pick, bins: int = BINS):
+        """The inner decile edges of the frames ``pick``' pooled prediction (at its rank
+        quantiles, as :func:`reliability` splits), or None with fewer pixels than bins."""
         allp = np.concatenate([self.ps[j] for j in pick])
         n = allp.size
         if n < bins:
             return None
         ranks = [n * k // bins for k in range(1, bins)]
-        edges = np.partition(allp, ranks)[ranks]
+        return np.partition(allp, ranks)[ranks]
+
+    def frame_sums(self, j: int, edges: np.ndarray) -> tuple:
+        """Frame ``j``'s summed prediction, summed observation and pixels per bin of
+        ``edges``."""
+        cut = np.concatenate(([0], np.searchsorted(self.ps[j], edges, side="left"),
+                              [self.ps[j].size]))
+        return np.diff(self.cp[j][cut]), np.diff(self.co[j][cut]), np.diff(cut)
+
+    def bins(self, pick, bins: int = BINS):
+        """``(mean predicted, mean observed, pixels)`` per decile bin of the frames ``pick``
+        (repeats allowed), or None with fewer pixels than bins."""
+        edges = self.edges(pick, bins)
+        if edges is None:
+            return None
         sp = np.zeros(bins)
         so = np.zeros(bins)
         cnt = np.zeros(bins)
         for j in pick:
-            cut = np.concatenate(([0], np.searchsorted(self.ps[j], edges, side="left"),
-                                  [self.ps[j].size]))
-            sp += np.diff(self.cp[j][cut])
-            so += np.diff(self.co[j][cut])
-            cnt += np.diff(cut)
+            a, b, c = self.frame_sums(j, edges)
+            sp += a
+            so += b
+            cnt += c
         with np.errstate(invalid="ignore", divide="ignore"):
             return sp / cnt, so / cnt, cnt
 
@@ -205,6 +222,38 @@ def leave_one_out(pred: list[np.ndarray], obs: list[np.ndarray], names: list[str
             "every_bin_passes_without": [r["left_out"] for r in rows if r["bins_passed"] == bins]}
 
 
+def excess_frames(pred: list[np.ndarray], obs: list[np.ndarray], names: list[str],
+                  top: int, bins: int = BINS) -> dict:
+    """Which frames carry a column's failing decile bins, where no one frame does alone
+    (:func:`leave_one_out`): per frame, the excess it adds to the failing bins (observed minus
+    predicted, degree-pixels, signed as each bin fails: under-prediction positive where the
+    bin reads high, over-prediction where it reads low), its share of their total and its own
+    observed / predicted there; the ``top`` frames of most excess. Empty where every bin
+    passes."""
+    frames = _Frames(pred, obs)
+    pick = range(len(pred))
+    got = frames.bins(pick, bins)
+    if got is None:
+        return {"bins": [], "frames": []}
+    mp, mo, cnt = got
+    fail = ~(passes(mp, mo) & (cnt > 0))
+    if not fail.any():
+        return {"bins": [], "frames": []}
+    edges = frames.edges(pick, bins)
+    sign = np.where(mo > mp, 1.0, -1.0)[fail]
+    rows = []
+    for j, name in enumerate(names):
+        sp, so, n = (x[fail] for x in frames.frame_sums(j, edges))
+        rows.append({"frame": name, "excess": float((sign * (so - sp)).sum()),
+                     "pixels": int(n.sum()),
+                     "ratio": float(so.sum() / sp.sum()) if sp.sum() > 0 else float("nan")})
+    total = sum(r["excess"] for r in rows)
+    for r in rows:
+        r["share"] = r["excess"] / total if total else float("nan")
+    rows.sort(key=lambda r: -r["excess"])
+    return {"bins": [int(i) + 1 for i in np.nonzero(fail)[0]], "frames": rows[:top]}
+
+
 #: Distance bins (px from the crease line) of the crease-band profile (``--creases``).
 BAND_EDGES = (0.0, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 10.0 + 1e-9)
 
@@ -251,7 +300,8 @@ class Column:
         self.obs.append(err[ok].astype(np.float64))
         self.names.append(name if name is not None else f"frame {len(self.names)}")
 
-    def summary(self, bootstrap: int = 0, seed: int = 0, loo: bool = False) -> dict:
+    def summary(self, bootstrap: int = 0, seed: int = 0, loo: bool = False,
+                excess: int = 0) -> dict:
         p = np.concatenate(self.pred) if self.pred else np.empty(0)
         o = np.concatenate(self.obs) if self.obs else np.empty(0)
         table = reliability(p, o) if p.size >= BINS else []
@@ -263,6 +313,8 @@ class Column:
             out["bootstrap"] = bootstrap_bins(self.pred, self.obs, bootstrap, seed)
         if loo and table and len(self.pred) > 1:
             out["leave_one_out"] = leave_one_out(self.pred, self.obs, self.names)
+        if excess and table and out["bins_passed"] < len(table):
+            out["excess_frames"] = excess_frames(self.pred, self.obs, self.names, excess)
         return out
 
 
@@ -421,6 +473,13 @@ def _print(name: str, s: dict) -> None:
             more = "; every bin passes without " + (", ".join(without) if without
                                                      else "none of them alone")
         print(f"  leaving one of {s['frames']} frames out: {min(got)}-{max(got)} bins pass{more}")
+    ex = s.get("excess_frames")
+    if ex and ex["frames"]:
+        print(f"  the frames that carry failing bin{'s' if len(ex['bins']) > 1 else ''} "
+              f"{', '.join(map(str, ex['bins']))} (share of their excess, observed / predicted "
+              "there, pixels):")
+        for r in ex["frames"]:
+            print(f"    {r['frame']:48s} {100 * r['share']:5.1f} %  {r['ratio']:5.2f}  {r['pixels']}")
 
 
 def _figure(results: dict, path: Path) -> None:
@@ -482,6 +541,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--leave-one-out", action="store_true",
                     help="also bin each column without each of its frames in turn: which frame "
                          "a failing decile hangs on")
+    ap.add_argument("--frames", type=int, default=0, metavar="N",
+                    help="for each column with a failing bin, the N frames that carry most of "
+                         "its excess there")
     a = ap.parse_args(argv)
     if a.real and not Path(a.real).is_dir():  # never a silently shorter table
         ap.error(f"--real {a.real}: no such folder (pass --real '' to leave the real frames out)")
@@ -493,6 +555,8 @@ def main(argv: list[str] | None = None) -> int:
                  "min_fraction, a share of the image)")
     if not 0 <= a.bootstrap <= 100_000:
         ap.error(f"--bootstrap {a.bootstrap}: must be in [0, 100000] (0: no resampling)")
+    if a.frames < 0:
+        ap.error(f"--frames {a.frames}: must be >= 0 (0: none listed)")
     if a.speed:
         speed(a.method, a.synth[0] if a.synth else None, a.real)
         return 0
@@ -504,7 +568,8 @@ def main(argv: list[str] | None = None) -> int:
     if a.real:
         cols.update(real_columns(Path(a.real), a.method, a.seed, a.min_fraction, a.creases,
                                  profiles))
-    results = {k: c.summary(a.bootstrap, a.seed, a.leave_one_out) for k, c in cols.items()}
+    results = {k: c.summary(a.bootstrap, a.seed, a.leave_one_out, a.frames)
+               for k, c in cols.items()}
     for k, s in results.items():
         _print(k, s)
     bands = {k: p.rows() for k, p in (profiles or {}).items()}

@@ -1009,6 +1009,29 @@ def test_calibration_bench_leave_one_out_names_the_frame_a_bin_hangs_on(load_ben
     np.testing.assert_allclose(rows["c"]["ratios"], [b["observed"] / b["predicted"] for b in table])
 
 
+def test_calibration_bench_excess_frames_carry_the_failing_bins(load_benchmark):
+    """``--frames N``: the frames ranked by the excess they add to a column's failing bins.
+    Six calibrated frames beside two that observe twice their prediction, one with twice the
+    other's pixels: those two lead, with two thirds and one third of the excess (the others'
+    is exactly 0) and their own ratio 2; a column whose every bin passes lists none."""
+    bench = load_benchmark("uncertainty_calibration")
+    rng = np.random.default_rng(4)
+    p = [rng.gamma(1.5, 2.0, 3000) for _ in range(6)] + [rng.gamma(1.5, 2.0, n) for n in (4000, 2000)]
+    o = [x.copy() for x in p[:6]] + [2.0 * p[6], 2.0 * p[7]]
+    names = [f"f{i}" for i in range(8)]
+    got = bench.excess_frames(p, o, names, top=3)
+    assert got["bins"]  # some decile fails: the two frames' pixels are 6000 of 24000
+    table = bench.reliability(np.concatenate(p), np.concatenate(o))
+    assert got["bins"] == [i + 1 for i, b in enumerate(table) if not b["pass"]]
+    top = got["frames"]
+    assert [r["frame"] for r in top[:2]] == ["f6", "f7"]
+    assert top[0]["share"] + top[1]["share"] == pytest.approx(1.0)
+    assert top[0]["share"] == pytest.approx(2.0 * top[1]["share"], rel=0.15)
+    assert top[0]["ratio"] == pytest.approx(2.0) and top[1]["ratio"] == pytest.approx(2.0)
+    assert top[2]["excess"] == 0.0 and top[2]["ratio"] == pytest.approx(1.0)
+    assert bench.excess_frames(p[:6], o[:6], names[:6], top=3) == {"bins": [], "frames": []}
+
+
 def test_calibration_bench_scores_the_crease_bands_on_request(shared_data, load_benchmark):
     """``--creases``: the real columns ``real+creases/<folder>`` hold the plane pixels and the
     crease band (crease_band) that the plane reference leaves out: on TUM fr2 the desk's front
