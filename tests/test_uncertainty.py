@@ -664,7 +664,7 @@ def test_support_map_misses_a_risers_margins():
 
 def _kinect_like_sawtooth(seed, period=8, shape=(240, 320), wall=1.5):
     """A wall ``wall`` m ahead whose middle (rows 60-179, columns 60-259) is a sawtooth of
-    45 deg faces ``period`` px apart (a relief of ``period / 4`` footprints, 1-2 cm), seen by
+    45 deg faces ``period`` px apart (``period / 2`` footprints peak to peak: 2 cm at 8 px), seen by
     :func:`_kinect_like_depth`: depth, K, the exact normals and the sawtooth's mask."""
     h, w = shape
     f = 300.0
