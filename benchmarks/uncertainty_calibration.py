@@ -231,19 +231,19 @@ def excess_frames(pred: list[np.ndarray], obs: list[np.ndarray], names: list[str
     observed / predicted there; the ``top`` frames of most excess. Empty where every bin
     passes."""
     frames = _Frames(pred, obs)
-    pick = range(len(pred))
-    got = frames.bins(pick, bins)
-    if got is None:
+    edges = frames.edges(range(len(pred)), bins)
+    if edges is None:
         return {"bins": [], "frames": []}
-    mp, mo, cnt = got
+    per = np.array([frames.frame_sums(j, edges) for j in range(len(pred))], dtype=np.float64)
+    tp, to, cnt = per.sum(axis=0)  # (the pooled table, as _Frames.bins adds it up)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mp, mo = tp / cnt, to / cnt
     fail = ~(passes(mp, mo) & (cnt > 0))
     if not fail.any():
         return {"bins": [], "frames": []}
-    edges = frames.edges(pick, bins)
     sign = np.where(mo > mp, 1.0, -1.0)[fail]
     rows = []
-    for j, name in enumerate(names):
-        sp, so, n = (x[fail] for x in frames.frame_sums(j, edges))
+    for (sp, so, n), name in zip(per[:, :, fail], names, strict=True):
         rows.append({"frame": name, "excess": float((sign * (so - sp)).sum()),
                      "pixels": int(n.sum()),
                      "ratio": float(so.sum() / sp.sum()) if sp.sum() > 0 else float("nan")})
