@@ -23,6 +23,14 @@ Columns:
   (interiors and rims, the structured-light threshold) and ``synth-off/<variant>`` the rest,
   both against the exact normals (no target: a diagnosis of where the map misses, the real
   frames having no reference off their planes);
+- with ``--by-crease``, each synthetic sensor column split by the exact geometry of its view
+  (:func:`geometry_labels` on the clean depth and the exact normals): ``synth-crease/<variant>``
+  the pixels within :data:`CREASE_PX` px of a crease (adjacent exact normals over
+  :data:`CREASE_DEG` deg apart where the clean depth is continuous), ``synth-jump/<variant>``
+  those within :data:`JUMP_PX` px of a depth jump (a relative step over :data:`JUMP_REL`), and
+  ``synth-rest/<variant>`` the others (a diagnosis: a column whose deciles pass may pass by
+  the mix of pixels the map reads too low and too high, and a set of other scenes mixes them
+  otherwise);
 - with ``--min-fraction F``, the real references keep planes down to ``F`` of the image
   (``plane_reference``'s ``min_fraction``, default 0.01): 0.0025 adds faces such as a table's
   front or a box's side, which the default leaves out (a diagnosis: the targets are read on
@@ -38,7 +46,8 @@ Columns:
   is found on the plane reference of its noisy depth and scored against the exact normals.
 
     python benchmarks/uncertainty_calibration.py [--method 3f2n+] [--synth /tmp/u-synth ...]
-        [--real ../shared/data/real-sensors] [--planes] [--min-fraction F] [--creases] [--json OUT]
+        [--real ../shared/data/real-sensors] [--planes] [--by-crease] [--min-fraction F]
+        [--creases] [--json OUT]
         [--figure PNG] [--bootstrap N] [--leave-one-out] [--frames N] [--speed]
 
 ``--bootstrap N``: each column's frames resampled N times with replacement; per decile bin the
@@ -254,6 +263,51 @@ def excess_frames(pred: list[np.ndarray], obs: list[np.ndarray], names: list[str
     return {"bins": [int(i) + 1 for i in np.nonzero(fail)[0]], "frames": rows[:top]}
 
 
+#: ``--by-crease``: a crease is a change of the exact normal over ``CREASE_DEG`` between
+#: adjacent pixels where the clean depth is continuous (relative step at most ``JUMP_REL``);
+#: pixels within ``CREASE_PX`` px (the chessboard distance) of one, or ``JUMP_PX`` of a jump.
+CREASE_DEG, CREASE_PX, JUMP_REL, JUMP_PX = 15.0, 8, 0.03, 4
+
+
+def _near(mark: np.ndarray, k: int) -> np.ndarray:
+    """The pixels within ``k`` px (chessboard distance) of a marked one."""
+    out = mark.copy()
+    for _ in range(k):
+        grow = out.copy()
+        grow[1:] |= out[:-1]
+        grow[:-1] |= out[1:]
+        out = grow.copy()
+        out[:, 1:] |= grow[:, :-1]
+        out[:, :-1] |= grow[:, 1:]
+    return out
+
+
+def geometry_labels(clean: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Per pixel of a synthetic view (the clean depth (H, W) and the exact normals (H, W, 3)):
+    1 within :data:`JUMP_PX` px of a depth jump (adjacent clean depths a relative step over
+    :data:`JUMP_REL` apart, or one of them invalid), else 2 within :data:`CREASE_PX` px of a
+    crease (adjacent exact normals over :data:`CREASE_DEG` deg apart, the depth continuous
+    between them), else 0 (int8 (H, W))."""
+    z = np.where(np.isfinite(clean) & (clean > 0), clean, np.nan).astype(np.float64)
+    g = np.asarray(normals, dtype=np.float64)
+    jump = np.zeros(z.shape, dtype=bool)
+    crease = np.zeros(z.shape, dtype=bool)
+    cos = np.cos(np.radians(CREASE_DEG))
+    for a, b, za, zb, sl, sr in ((g[:, 1:], g[:, :-1], z[:, 1:], z[:, :-1],
+                                  (slice(None), slice(1, None)), (slice(None), slice(None, -1))),
+                                 (g[1:], g[:-1], z[1:], z[:-1],
+                                  (slice(1, None), slice(None)), (slice(None, -1), slice(None)))):
+        with np.errstate(invalid="ignore"):
+            step = ~(np.abs(za - zb) <= JUMP_REL * np.fmin(za, zb))  # NaN: a jump
+            bend = ~step & ~((a * b).sum(-1) >= cos)
+        for side in (sl, sr):  # both pixels of the pair
+            jump[side] |= step
+            crease[side] |= bend
+    out = np.where(_near(crease, CREASE_PX), 2, 0).astype(np.int8)
+    out[_near(jump, JUMP_PX)] = 1
+    return out
+
+
 #: Distance bins (px from the crease line) of the crease-band profile (``--creases``).
 BAND_EDGES = (0.0, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 10.0 + 1e-9)
 
@@ -333,19 +387,26 @@ def analytic_columns(method: str, noise: float, seed: int) -> dict[str, Column]:
 
 
 def synth_columns(root: Path | list[Path], method: str, planes: bool = False, seed: int = 0,
-                  profiles: dict[str, BandProfile] | None = None) -> dict[str, Column]:
+                  profiles: dict[str, BandProfile] | None = None,
+                  by_crease: bool = False) -> dict[str, Column]:
     """One column per sensor model of the synthetic folder ``root`` (several: their frames
     pooled, each named by its folder); with ``planes`` also
     its pixels on and off the plane reference of the noisy depth (module doc); with
     ``profiles`` (a dict), the crease-band profile of each noisy model, the band found on the
-    noisy depth's plane reference and scored against the exact normals."""
+    noisy depth's plane reference and scored against the exact normals; with ``by_crease``,
+    its pixels by a crease, by a jump and the rest (:func:`geometry_labels` on the view's
+    clean depth, which a set holds before its noisy variants; a view without one raises)."""
     from depthnormals.datasets.synthetic import read_synthetic
     from depthnormals.evaluate import crease_band, plane_reference, sensor_threshold
 
     roots = [root] if isinstance(root, Path) else list(root)
     cols: dict[str, Column] = {}
+    labels: tuple = (None, None)  # the view (folder, scene, name) and its geometry_labels
     for folder, f in ((r, f) for r in roots for f in read_synthetic(r)):
         variant = f.meta.get("variant", f.group.rsplit("/", 1)[-1])
+        view = (folder, f.group.rsplit("/", 1)[0], f.name)
+        if by_crease and variant == "clean":
+            labels = (view, geometry_labels(f.depth, f.normals))
         n, u = dn.estimate_normals(f.depth, f.K, method=method, return_uncertainty=True)
         err = dn.angular_error(n, f.normals)
         name = f"{f.group}/{f.name}" if len(roots) == 1 else f"{folder.name}/{f.group}/{f.name}"
@@ -362,6 +423,14 @@ def synth_columns(root: Path | list[Path], method: str, planes: bool = False, se
             keep = np.ones(on.shape, dtype=bool) if f.mask is None else f.mask
             cols.setdefault(f"synth-planes/{variant}", Column()).add(u, err, keep & on)
             cols.setdefault(f"synth-off/{variant}", Column()).add(u, err, keep & ~on)
+        if by_crease and variant != "clean":
+            if labels[0] != view:
+                raise ValueError(f"--by-crease: {folder}/{f.group}/{f.name} has no clean "
+                                 "variant before it (the exact geometry's depth)")
+            keep = np.ones(u.shape, dtype=bool) if f.mask is None else f.mask
+            for kind, code in (("synth-crease", 2), ("synth-jump", 1), ("synth-rest", 0)):
+                cols.setdefault(f"{kind}/{variant}", Column()).add(u, err, keep & (labels[1] == code),
+                                                                   name=name)
     return cols
 
 
@@ -442,11 +511,14 @@ def speed(method: str, synth: Path | None, real: str, repeats: int = 25) -> None
         print(f"all frames: x{total[1] / total[0]:.2f}")
 
 
+SYNTH_KINDS = ("synth", "synth-planes", "synth-off", "synth-crease", "synth-jump", "synth-rest")
+
+
 def _order(name: str) -> tuple:
     """Columns in print order: analytic, then per sensor model all, on and off planes."""
     kind, _, variant = name.partition("/")
-    return (kind != "analytic", variant, ("synth", "synth-planes", "synth-off").index(kind)
-            if kind.startswith("synth") else 0)
+    return (kind != "analytic", variant, SYNTH_KINDS.index(kind) if kind.startswith("synth")
+            else 0)
 
 
 def _print(name: str, s: dict) -> None:
@@ -529,6 +601,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--speed", action="store_true", help="time with and without the map instead")
     ap.add_argument("--planes", action="store_true",
                     help="also score the synthetic columns on and off their plane reference")
+    ap.add_argument("--by-crease", action="store_true",
+                    help="also score each synthetic column's pixels by a crease, by a jump and "
+                         "the rest (the exact geometry of the view)")
     ap.add_argument("--min-fraction", type=float, default=None,
                     help="the real plane references' smallest plane, a share of the image "
                          "(plane_reference's default 0.01; smaller: faces the default leaves out)")
@@ -563,7 +638,7 @@ def main(argv: list[str] | None = None) -> int:
     cols = analytic_columns(a.method, a.noise, a.seed)
     profiles: dict[str, BandProfile] | None = {} if a.creases else None
     if a.synth is not None:
-        cols.update(synth_columns(a.synth, a.method, a.planes, a.seed, profiles))
+        cols.update(synth_columns(a.synth, a.method, a.planes, a.seed, profiles, a.by_crease))
         cols = dict(sorted(cols.items(), key=lambda kv: _order(kv[0])))
     if a.real:
         cols.update(real_columns(Path(a.real), a.method, a.seed, a.min_fraction, a.creases,

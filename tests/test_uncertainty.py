@@ -885,6 +885,64 @@ def test_calibration_bench_splits_synthetic_on_and_off_planes(tmp_path, load_ben
              ("synth-planes/kinect_v1", "synth-off/kinect_v1"))] == [True] * 3
 
 
+def test_calibration_bench_geometry_labels_a_crease_and_a_jump(load_benchmark):
+    """``geometry_labels`` (``--by-crease``): a floor 2 m away whose columns 20.. bend up by
+    60 deg (a crease at column 20, the depth continuous across it) and whose rows 30.. stand
+    on a step 0.5 m farther (a jump at row 30): pixels within 4 px of the jump read 1, within
+    8 px of the crease 2 (the jump wins where both), the rest 0; a bend of 10 deg is no
+    crease, a relative step of 2 % no jump."""
+    bench = load_benchmark("uncertainty_calibration")
+    assert (bench.CREASE_DEG, bench.CREASE_PX, bench.JUMP_REL, bench.JUMP_PX) == (15.0, 8, 0.03, 4)
+    h, w = 48, 40
+
+    def scene(bend_deg, step):
+        z = np.full((h, w), 2.0)
+        z[30:] += step
+        n = np.zeros((h, w, 3))
+        n[..., 2] = -1.0
+        t = np.radians(bend_deg)
+        n[:, 20:] = (np.sin(t), 0.0, -np.cos(t))
+        return z.astype(np.float32), n.astype(np.float32)
+
+    lab = bench.geometry_labels(*scene(60.0, 0.5))
+    col = np.arange(w)
+    near_crease = (col >= 19 - 8) & (col <= 20 + 8)
+    for v in (0, 10, 24, 40, 47):  # rows farther than 4 px from the jump (rows 29 | 30)
+        np.testing.assert_array_equal(lab[v], np.where(near_crease, 2, 0))
+    np.testing.assert_array_equal(lab[25:35], 1)  # rows 29 and 30 and 4 px either side
+    assert lab[24, 0] == 0 and lab[35, 0] == 0
+    # a 10 deg bend and a 2 % step: neither
+    np.testing.assert_array_equal(bench.geometry_labels(*scene(10.0, 0.04)), 0)
+    # an invalid depth is a jump
+    z, n = scene(0.0, 0.0)
+    z[5, 5] = 0.0
+    lab = bench.geometry_labels(z, n)
+    assert lab[1, 1] == 1 and lab[9, 9] == 1 and lab[10, 10] == 0 and lab[0, 10] == 0
+
+
+def test_calibration_bench_splits_synthetic_by_crease(tmp_path, load_benchmark):
+    """``--by-crease``: each noisy column's pixels by a crease, by a jump and the rest are
+    exactly the column (none lost or counted twice; the frames named as the column's), each
+    part of a room scene has pixels, and the clean column is not split."""
+    from depthnormals.camera import Intrinsics
+    from depthnormals.synth import generate
+
+    generate(tmp_path, indoor=1, outdoor=0, views=2, seed=3, K=Intrinsics(91.375, 91.375, 63.5, 52.5),
+             size=(106, 128), progress=False, noise=("kinect_v1",))
+    bench = load_benchmark("uncertainty_calibration")
+    cols = bench.synth_columns(tmp_path, "3f2n+", by_crease=True)
+    parts = ("synth-crease/kinect_v1", "synth-jump/kinect_v1", "synth-rest/kinect_v1")
+    assert set(cols) == {"synth/clean", "synth/kinect_v1", *parts}
+    whole = cols["synth/kinect_v1"]
+    assert all(cols[k].summary()["pixels"] > 0 for k in parts)
+    for j in range(2):  # per frame, the three parts are the frame's pixels
+        assert all(cols[k].names[j] == whole.names[j] for k in parts)
+        np.testing.assert_array_equal(np.sort(np.concatenate([cols[k].pred[j] for k in parts])),
+                                      np.sort(whole.pred[j]))
+    assert bench._order("synth/kinect_v1") < bench._order("synth-crease/kinect_v1") < \
+        bench._order("synth-rest/kinect_v1")
+
+
 def test_calibration_bench_pools_several_synthetic_folders(tmp_path, load_benchmark):
     """``--synth A B``: each sensor column holds the frames of both folders, its pixels
     exactly the sum of the two folders' (none lost or counted twice), the frames named by
