@@ -269,25 +269,14 @@ def excess_frames(pred: list[np.ndarray], obs: list[np.ndarray], names: list[str
 CREASE_DEG, CREASE_PX, JUMP_REL, JUMP_PX = 15.0, 8, 0.03, 4
 
 
-def _near(mark: np.ndarray, k: int) -> np.ndarray:
-    """The pixels within ``k`` px (chessboard distance) of a marked one."""
-    out = mark.copy()
-    for _ in range(k):
-        grow = out.copy()
-        grow[1:] |= out[:-1]
-        grow[:-1] |= out[1:]
-        out = grow.copy()
-        out[:, 1:] |= grow[:, :-1]
-        out[:, :-1] |= grow[:, 1:]
-    return out
-
-
 def geometry_labels(clean: np.ndarray, normals: np.ndarray) -> np.ndarray:
     """Per pixel of a synthetic view (the clean depth (H, W) and the exact normals (H, W, 3)):
     1 within :data:`JUMP_PX` px of a depth jump (adjacent clean depths a relative step over
     :data:`JUMP_REL` apart, or one of them invalid), else 2 within :data:`CREASE_PX` px of a
     crease (adjacent exact normals over :data:`CREASE_DEG` deg apart, the depth continuous
     between them), else 0 (int8 (H, W))."""
+    from depthnormals.evaluate._creases import _reach  # the crease bands' chessboard distance
+
     z = np.where(np.isfinite(clean) & (clean > 0), clean, np.nan).astype(np.float64)
     g = np.asarray(normals, dtype=np.float64)
     jump = np.zeros(z.shape, dtype=bool)
@@ -303,8 +292,8 @@ def geometry_labels(clean: np.ndarray, normals: np.ndarray) -> np.ndarray:
         for side in (sl, sr):  # both pixels of the pair
             jump[side] |= step
             crease[side] |= bend
-    out = np.where(_near(crease, CREASE_PX), 2, 0).astype(np.int8)
-    out[_near(jump, JUMP_PX)] = 1
+    out = np.where(_reach(crease, CREASE_PX) <= CREASE_PX, 2, 0).astype(np.int8)
+    out[_reach(jump, JUMP_PX) <= JUMP_PX] = 1
     return out
 
 
