@@ -504,7 +504,8 @@ SYNTH_KINDS = ("synth", "synth-planes", "synth-off", "synth-crease", "synth-jump
 
 
 def _order(name: str) -> tuple:
-    """Columns in print order: analytic, then per sensor model all, on and off planes."""
+    """Columns in print order: analytic, then per sensor model all, on and off planes, by a
+    crease, by a jump and the rest (:data:`SYNTH_KINDS`)."""
     kind, _, variant = name.partition("/")
     return (kind != "analytic", variant, SYNTH_KINDS.index(kind) if kind.startswith("synth")
             else 0)

@@ -920,10 +920,11 @@ def test_calibration_bench_geometry_labels_a_crease_and_a_jump(load_benchmark):
     assert lab[1, 1] == 1 and lab[9, 9] == 1 and lab[10, 10] == 0 and lab[0, 10] == 0
 
 
-def test_calibration_bench_splits_synthetic_by_crease(tmp_path, load_benchmark):
+def test_calibration_bench_splits_synthetic_by_crease(tmp_path, load_benchmark, monkeypatch):
     """``--by-crease``: each noisy column's pixels by a crease, by a jump and the rest are
     exactly the column (none lost or counted twice; the frames named as the column's), each
-    part of a room scene has pixels, and the clean column is not split."""
+    part of a room scene has pixels, and the clean column is not split; a set without the
+    clean variant raises."""
     from depthnormals.camera import Intrinsics
     from depthnormals.synth import generate
 
@@ -941,6 +942,15 @@ def test_calibration_bench_splits_synthetic_by_crease(tmp_path, load_benchmark):
                                       np.sort(whole.pred[j]))
     assert bench._order("synth/kinect_v1") < bench._order("synth-crease/kinect_v1") < \
         bench._order("synth-rest/kinect_v1")
+    # a set without the clean variant (the exact geometry's depth) is refused, not mislabelled
+    import depthnormals.datasets.synthetic as synthetic
+
+    read = synthetic.read_synthetic
+    monkeypatch.setattr(synthetic, "read_synthetic",
+                        lambda root: (f for f in read(root) if f.meta.get("variant") != "clean"))
+    with pytest.raises(ValueError, match="no clean variant"):
+        bench.synth_columns(tmp_path, "3f2n+", by_crease=True)
+    assert "synth/kinect_v1" in bench.synth_columns(tmp_path, "3f2n+")  # without the split: fine
 
 
 def test_calibration_bench_pools_several_synthetic_folders(tmp_path, load_benchmark):
