@@ -400,26 +400,24 @@ def synth_columns(root: Path | list[Path], method: str, planes: bool = False, se
         err = dn.angular_error(n, f.normals)
         name = f"{f.group}/{f.name}" if len(roots) == 1 else f"{folder.name}/{f.group}/{f.name}"
         cols.setdefault(f"synth/{variant}", Column()).add(u, err, f.mask, name=name)
+        valid = np.ones(u.shape, dtype=bool) if f.mask is None else f.mask
         if (planes or profiles is not None) and variant != "clean":
             ref = plane_reference(f.depth, f.K, seed=seed, threshold=sensor_threshold({}))
         if profiles is not None and variant != "clean":
             band = crease_band(f.depth, f.K, ref)
-            keep = band.mask if f.mask is None else band.mask & f.mask
             profiles.setdefault(f"synth/{variant}", BandProfile()).add(
-                u, err, np.where(keep, band.distance, np.nan))
+                u, err, np.where(band.mask & valid, band.distance, np.nan))
         if planes and variant != "clean":
             on = ref.interior | ref.rim
-            keep = np.ones(on.shape, dtype=bool) if f.mask is None else f.mask
-            cols.setdefault(f"synth-planes/{variant}", Column()).add(u, err, keep & on)
-            cols.setdefault(f"synth-off/{variant}", Column()).add(u, err, keep & ~on)
+            cols.setdefault(f"synth-planes/{variant}", Column()).add(u, err, valid & on)
+            cols.setdefault(f"synth-off/{variant}", Column()).add(u, err, valid & ~on)
         if by_crease and variant != "clean":
             if labels[0] != view:
                 raise ValueError(f"--by-crease: {folder}/{f.group}/{f.name} has no clean "
                                  "variant before it (the exact geometry's depth)")
-            keep = np.ones(u.shape, dtype=bool) if f.mask is None else f.mask
             for kind, code in (("synth-crease", 2), ("synth-jump", 1), ("synth-rest", 0)):
-                cols.setdefault(f"{kind}/{variant}", Column()).add(u, err, keep & (labels[1] == code),
-                                                                   name=name)
+                cols.setdefault(f"{kind}/{variant}", Column()).add(
+                    u, err, valid & (labels[1] == code), name=name)
     return cols
 
 
