@@ -727,8 +727,9 @@ def support_select(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
     (every second row and column from :data:`HALF_RADIUS` on), the residual variances of the
     chosen radius's windows (footprints^2 of the profile), their shift, the normals chosen
     before the fallback, the deviations, the limit past which pixels fell back (inf where the
-    radius allows none) and whether that grid is the half one, for the uncertainty map
-    (:mod:`depthnormals.ddm.uncertainty`); the normals do not change."""
+    radius allows none), whether that grid is the half one and the normals on that grid after
+    the fallback (the output, but not yet turned toward each pixel's ray on the half grid), for
+    the uncertainty map (:mod:`depthnormals.ddm.uncertainty`); the normals do not change."""
     p = support_profile(z, fx, fy, cx, cy, sigma) if profile is None else profile
     h, w = z.shape
     out = np.empty((h, w, 3), dtype=np.float32)
@@ -737,7 +738,7 @@ def support_select(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
         args = choice_inputs(z, fx, fy, cx, cy, p)
         dev, limit, before = _choose(z, z, args, out, 16, keep)
         if keep:
-            out_scores.extend((args[0][1], args[2], before, dev, limit, False))
+            out_scores.extend((args[0][1], args[2], before, dev, limit, False, out))
         return out
     zd = np.ascontiguousarray(z[::2, ::2])
     cam = (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy)
@@ -747,7 +748,7 @@ def support_select(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
     half = np.empty((zd.shape[0], zd.shape[1], 3), dtype=np.float32)
     dev, limit, before = _choose(zd, zfill, args, half, 8, keep)
     if keep:
-        out_scores.extend((args[0][1], args[2], before, dev, limit, True))
+        out_scores.extend((args[0][1], args[2], before, dev, limit, True, half))
     run_rows(_upsample_rows, h, z, half, (float(fx), float(fy), float(cx), float(cy)), out,
              min_rows=16)
     return out

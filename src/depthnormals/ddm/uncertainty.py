@@ -63,13 +63,17 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
   face beside it, coherently, so no spread sees it, but its depth does; all of it read on the
   branch's choice before its fallback to small windows (session 16,
   :func:`depthnormals.ddm.support._fallback_rows`), the pixels that fell back at
-  :data:`FALLBACK_SCALE` times their map;
+  :data:`FALLBACK_SCALE` times their map, and (session 24) at least a share of the angle
+  between the output normals across their cell's edges (:data:`CREASE_FLOOR`,
+  :func:`_cell_edges_rows`): a pixel at a face boundary that took the wrong face errs by
+  about that angle;
 - **clean depth** (the plane hypotheses): the float rounding of the one-pixel stencils
   (``sigma / sqrt(6)``) plus, where the pixel's normal agrees with none of its four neighbours'
   (a facet narrower than two pixels: no one-sided stencil fits), the least angle between them.
 
 Vectorised passes per image (:func:`_fit_error_rows`, :func:`_spreads_rows`,
-:func:`_offsets_rows`, :func:`_edge_integrals`, :func:`_support_rows`, :func:`_spread_rows`) over
+:func:`_offsets_rows`, :func:`_edge_integrals`, :func:`_support_rows`, :func:`_spread_rows`,
+:func:`_cell_edges_rows`, :func:`_upsample_rows`) over
 quantities the branches already computed; the densities are read on every second row and
 column of the map's grid. Conversions to the von
 Mises-Fisher concentration of Bae et al. (ICCV 2021): :func:`uncertainty_to_kappa`,
@@ -206,6 +210,22 @@ DEPTH_FULL = 0.5
 #: its own, the map mixed with the angle between the normals): kinect_v1 9/9/10/10/9 bins over
 #: seeds 0-4 (was 9/7/10/9/8), the real folders 42 of 60 (was 49), the map past 1.3x.
 FALLBACK_SCALE = 0.8
+#: Measured support, last, where the pixel's cell fell back to small windows: at least ``a A``,
+#: ``A`` the angle (degrees) between the output normals of two adjacent cells of the choice's
+#: grid where it exceeds ``theta``: the edges of the pixel's cell that the pixel lies on at
+#: ``a``, the cell's other edges at ``a w`` (on the pixel grid a pixel lies on all four);
+#: ``CREASE_FLOOR = (a, w, theta)``. A pixel whose depth left its window's plane (a face
+#: boundary) and whose small-window normal differs from its neighbour's by a crease errs by
+#: about that angle where it took the wrong face; no mean over directions (the spreads) reads
+#: it, and the map read such pixels 0.40-0.47x their error (session 24, docs/benchmarks.md
+#: 17: 17.5 / 43.9 deg on the real frames' plane pixels, 20.4 / 45.7 and 23.3 / 50.0 on
+#: synthetic kinect_v1, asset and procedural scenes; with ``a = 0.5`` still 0.76-0.83x, so
+#: 0.6). Without the gate (every pixel by an
+#: output crease) the synthetic preset columns gained more (kinect_v1 6 -> 9 of 10 bins on
+#: both seeds, against 7 and 7 with it) but the real frames' pixels beside an output crease
+#: whose own cell kept its window read 0.62-0.64x (the real folders 49 -> 43 of 60 bins; 46
+#: with the gate), and the pixels by the real frames' own creases did not move.
+CREASE_FLOOR = (0.6, 0.6, 20.0)
 #: The near spread ``s_N`` of both noisy maps: cells of the map's grid (the box-fit's is
 #: the pixel grid; the measured support's is mostly the half grid, 6 pixels).
 NEAR_SPAN = 3
@@ -474,12 +494,16 @@ def _interior_pairs(normals, z, score, gates, span, grid, out):
                 fb = _growth(zb, izref, half)
                 if not (score[vv // step, uu // step] <= g0 * fb):
                     continue
-                d = (normals[v, u, 0] * normals[vv, uu, 0] + normals[v, u, 1] * normals[vv, uu, 1]
-                     + normals[v, u, 2] * normals[vv, uu, 2])
-                if not (d == d):
+                dx = normals[v, u, 0] - normals[vv, uu, 0]
+                dy = normals[v, u, 1] - normals[vv, uu, 1]
+                dz = normals[v, u, 2] - normals[vv, uu, 2]
+                c2 = dx * dx + dy * dy + dz * dz
+                if not (c2 == c2):
                     continue
-                d = min(1.0, max(-1.0, d))
-                out[k] = math.degrees(math.acos(d)) / math.sqrt(0.5 * (fa + fb))
+                # the angle from the chord (2 asin(k / 2); exact to 1e-6 below 10 deg)
+                c = math.sqrt(c2)
+                ang = c + c * c2 * (1.0 / 24.0 + c2 * (3.0 / 640.0))
+                out[k] = math.degrees(ang) / math.sqrt(0.5 * (fa + fb))
                 k += 1
     return k
 
@@ -872,8 +896,14 @@ def _offsets_rows(v0, v1, z, planar, spans, cam, out):
     nan = f32(np.nan)
     fx, fy, cx, cy = cam
     rx = ((np.arange(w) - cx) / fx).astype(f32)
-    p = np.empty((3, w), dtype=f32)
-    q = np.empty((3, w), dtype=f32)
+    dmax = 0
+    for d in spans:
+        dmax = max(dmax, d)
+    r0 = max(0, v0 - dmax)
+    r1 = min(h, v1 + dmax)
+    pts = np.empty((r1 - r0, 3, w), dtype=f32)  # each row's points once
+    for v in range(r0, r1):
+        _row_points(z, v, rx, f32((v - cy) / fy), pts[v - r0])
     inv = np.empty(w, dtype=f32)
     a = np.empty(w, dtype=f32)
     b = np.empty(w, dtype=f32)
@@ -881,7 +911,7 @@ def _offsets_rows(v0, v1, z, planar, spans, cam, out):
     for v in range(v0, v1):
         row = planar[v]
         x, y, t = row[0], row[1], row[2]
-        _row_points(z, v, rx, f32((v - cy) / fy), p)
+        p = pts[v - r0]
         zr = z[v]
         for u in range(w):
             inv[u] = f32(fx) / zr[u]
@@ -898,9 +928,9 @@ def _offsets_rows(v0, v1, z, planar, spans, cam, out):
                              p[1, :hi], p[2, :hi], inv[d:], b[d:])
                 _straddle_into(a, b, best)
             if v + d < h and v - d >= 0:
-                _row_points(z, v + d, rx, f32((v + d - cy) / fy), q)
+                q = pts[v + d - r0]
                 _offset_into(x, y, t, p[0], p[1], p[2], q[0], q[1], q[2], inv, a)
-                _row_points(z, v - d, rx, f32((v - d - cy) / fy), q)
+                q = pts[v - d - r0]
                 _offset_into(x, y, t, p[0], p[1], p[2], q[0], q[1], q[2], inv, b)
                 _straddle_into(a, b, best)
             o = out[i, v]
@@ -1198,7 +1228,7 @@ def _support_branch(z, cam, sigma, prof):
     # the spreads and offsets read the choice before the fallback: a pixel whose window was
     # right reads as it did; the ones that fell back (deviation past ``limit``, as the branch
     # decided it) read FALLBACK_SCALE times their map (_support_rows)
-    score, _, chosen, dev, limit, halved = scores
+    score, _, chosen, dev, limit, halved, final = scores
     e_i = _interior_error(out, z, score, prof)
     zref = prof.depth if prof.depth == prof.depth else 1.0
     half = round(2.0 * prof.exponent) if prof.depth == prof.depth else 0
@@ -1213,34 +1243,174 @@ def _support_branch(z, cam, sigma, prof):
     ctx = (*_context(zg, chosen, big_g, cam_g, growth=model[1:]), dev, limit)
     grid = np.empty(zg.shape, dtype=np.float32)  # (a half-grid cell of invalid depth: e_i)
     run_rows(_support_rows, zg.shape[0], zg, chosen, model, ctx, grid, min_rows=rows)
+    a, far, theta = CREASE_FLOOR
+    edges = np.empty((2, *zg.shape), dtype=np.float32)
+    run_rows(_cell_edges_rows, zg.shape[0], final, math.degrees(a),
+             math.cos(math.radians(theta)), edges, min_rows=rows)
     if not halved:
+        run_rows(_floor_rows, zg.shape[0], edges, dev, limit, grid, min_rows=16)
         return out, grid
     unc = np.empty(z.shape, dtype=np.float32)
-    run_rows(_upsample_rows, z.shape[0], grid, z, unc, min_rows=16)
+    run_rows(_upsample_rows, z.shape[0], grid, edges, far, dev, limit, z, unc, min_rows=16)
     return out, unc
 
 
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _dot_into(x, y, t, a, b, c, out):
+    """``out = x a + y b + t c`` elementwise (NaN where either normal is)."""
+    for i in range(out.size):
+        out[i] = x[i] * a[i] + y[i] * b[i] + t[i] * c[i]
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _crease_into(d, scale, cth, out):
+    """``out = scale`` times the angle (radians) of the cosines ``d`` where below ``cth``, else 0
+    (NaN too): ``2 asin(k / 2) ~ k + k^3 / 24 + 3 k^5 / 640`` of the chord ``k`` (0.8 % low at
+    90 deg)."""
+    f32 = np.float32
+    for i in range(out.size):
+        c2 = f32(2.0) - f32(2.0) * d[i]
+        c2 = c2 if c2 > f32(0.0) else f32(0.0)
+        k = np.sqrt(c2)
+        ang = k + k * c2 * (f32(1.0 / 24.0) + c2 * f32(3.0 / 640.0))
+        out[i] = scale * ang if d[i] < cth else f32(0.0)
+
+
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _upsample_rows(v0, v1, coarse, z, out):
-    """Rows ``[v0, v1)``: ``out[v, u] = coarse[v // 2, u // 2]``, NaN where the depth ``z``
-    is (the branch's normal is NaN exactly there and where its cell's is, whose ``coarse`` is
-    NaN). Every loop runs along a row, without a branch (``x - x`` is 0, or NaN where the depth
-    ``x`` is)."""
+def _cell_edges_rows(v0, v1, normals, scale, cth, out):
+    """Rows ``[v0, v1)`` of ``out`` (2, H, W): ``scale`` times the angle (radians; degrees for
+    ``scale`` in degrees per radian) between the normals (H, W, 3) of each cell and of the cell
+    to its right (``out[0]``) and below (``out[1]``) where its cosine is below ``cth``; 0
+    elsewhere, on the last column and row and where either is NaN."""
+    h, w = normals.shape[:2]
+    f32 = np.float32
+    sc = f32(scale)
+    ct = f32(cth)
+    cur = np.empty((3, w), dtype=f32)
+    nxt = np.empty((3, w), dtype=f32)
+    d = np.empty(w, dtype=f32)
+    if v0 < v1:
+        _planar_row(normals, v0, cur)
+    for i in range(v0, v1):
+        x = cur[0]
+        y = cur[1]
+        t = cur[2]
+        right = out[0, i]
+        if w > 1:
+            _dot_into(x[:w - 1], y[:w - 1], t[:w - 1], x[1:], y[1:], t[1:], d[:w - 1])
+            _crease_into(d[:w - 1], sc, ct, right[:w - 1])
+        right[w - 1] = 0.0
+        below = out[1, i]
+        if i + 1 < h:
+            _planar_row(normals, i + 1, nxt)
+            _dot_into(x, y, t, nxt[0], nxt[1], nxt[2], d)
+            _crease_into(d, sc, ct, below)
+            cur, nxt = nxt, cur  # row i + 1 is read once
+        else:
+            below[:] = 0.0
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _edge_rows(edges, i, left, above):
+    """The edges of row ``i`` of the cells (:func:`_cell_edges_rows`) that lie to the left and
+    above of each cell into ``left`` and ``above`` (0 on the first column and row)."""
+    w = left.size
+    r = edges[0, i]
+    left[0] = 0.0
+    for j in range(1, w):
+        left[j] = r[j - 1]
+    if i > 0:
+        above[:] = edges[1, i - 1]
+    else:
+        above[:] = 0.0
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _floor_rows(v0, v1, edges, dev, limit, out):
+    """Rows ``[v0, v1)`` of the map ``out`` on the pixel grid: at least the largest of the four
+    edges of each pixel (:func:`_cell_edges_rows`, :data:`CREASE_FLOOR`); NaN stays NaN."""
     w = out.shape[1]
-    h2 = w >> 1
+    f32 = np.float32
+    left = np.empty(w, dtype=f32)
+    above = np.empty(w, dtype=f32)
+    cap = f32(MAX_ERROR)
+    lim = f32(limit)
     for v in range(v0, v1):
-        c = coarse[v >> 1]
+        _edge_rows(edges, v, left, above)
+        r = edges[0, v]
+        b = edges[1, v]
+        o = out[v]
+        dv = dev[v]
+        for u in range(w):
+            e = r[u] if r[u] > left[u] else left[u]
+            e = e if e > b[u] else b[u]
+            e = e if e > above[u] else above[u]
+            e = e if e < cap else cap
+            e = e if dv[u] > lim else f32(0.0)
+            m = o[u]
+            o[u] = e if e > m else m  # NaN > e is false: NaN stays
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _upsample_rows(v0, v1, coarse, edges, far, dev, limit, z, out):
+    """Rows ``[v0, v1)``: ``out[v, u] = coarse[v // 2, u // 2]``, at least the crease floor of
+    its cell's edges (:func:`_cell_edges_rows`; those the pixel lies on, the left or right and
+    the upper or lower by the parity of ``u`` and ``v``, whole, the other two times ``far``;
+    :data:`CREASE_FLOOR`), NaN where the depth ``z`` is (the branch's normal is NaN exactly
+    there and where its cell's is, whose ``coarse`` is NaN). Every pixel loop runs along a row,
+    without a branch (``x - x`` is 0, or NaN where the depth ``x`` is)."""
+    w = out.shape[1]
+    wc = coarse.shape[1]
+    h2 = w >> 1
+    f32 = np.float32
+    wf = f32(far)
+    cap = f32(MAX_ERROR)
+    left = np.empty(wc, dtype=f32)
+    above = np.empty(wc, dtype=f32)
+    cell = np.empty(wc, dtype=f32)  # the cell's floor from all four edges, times far
+    gate = np.empty(wc, dtype=f32)  # 1 where the cell fell back, else 0
+    lim = f32(limit)
+    i_prev = -1
+    for v in range(v0, v1):
+        i = v >> 1
+        c = coarse[i]
+        r = edges[0, i]
+        b = edges[1, i]
+        if i != i_prev:
+            _edge_rows(edges, i, left, above)
+            for j in range(wc):
+                e = r[j] if r[j] > left[j] else left[j]
+                e = e if e > b[j] else b[j]
+                e = e if e > above[j] else above[j]
+                cell[j] = e * wf
+            dv = dev[i]
+            for j in range(wc):
+                gate[j] = f32(1.0) if dv[j] > lim else f32(0.0)
+            i_prev = i
+        side = b if v & 1 else above  # the horizontal edge the pixel's row lies on
         zr = z[v]
         o = out[v]
         for j in range(h2):
             x = zr[2 * j]
             y = zr[2 * j + 1]
             cj = c[j]
-            o[2 * j] = cj + (x - x)
-            o[2 * j + 1] = cj + (y - y)
+            s = side[j]
+            fc = cell[j]
+            e0 = left[j] if left[j] > s else s
+            e0 = e0 if e0 > fc else fc
+            e0 = (e0 if e0 < cap else cap) * gate[j]
+            e1 = r[j] if r[j] > s else s
+            e1 = e1 if e1 > fc else fc
+            e1 = (e1 if e1 < cap else cap) * gate[j]
+            o[2 * j] = (e0 if e0 > cj else cj) + (x - x)  # NaN cj stays NaN
+            o[2 * j + 1] = (e1 if e1 > cj else cj) + (y - y)
         if w & 1:
             x = zr[w - 1]
-            o[w - 1] = c[h2] + (x - x)
+            s = side[h2]
+            e0 = left[h2] if left[h2] > s else s
+            e0 = e0 if e0 > cell[h2] else cell[h2]
+            e0 = (e0 if e0 < cap else cap) * gate[h2]
+            o[w - 1] = (e0 if e0 > c[h2] else c[h2]) + (x - x)
 
 
 def _clean_branch(z, cam, sigma):
