@@ -220,11 +220,11 @@ FALLBACK_SCALE = 0.8
 #: it, and the map read such pixels 0.40-0.47x their error (session 24, docs/benchmarks.md
 #: 17: 17.5 / 43.9 deg on the real frames' plane pixels, 20.4 / 45.7 and 23.3 / 50.0 on
 #: synthetic kinect_v1, asset and procedural scenes; with ``a = 0.5`` still 0.76-0.83x, so
-#: 0.6). Without the gate (every pixel by an
-#: output crease) the synthetic preset columns gained more (kinect_v1 6 -> 9 of 10 bins on
-#: both seeds, against 7 and 7 with it) but the real frames' pixels beside an output crease
-#: whose own cell kept its window read 0.62-0.64x (the real folders 49 -> 43 of 60 bins; 46
-#: with the gate), and the pixels by the real frames' own creases did not move.
+#: 0.6). Without the gate (every pixel by an output crease) the synthetic preset columns
+#: gained more (kinect_v1 6 -> 9 of 10 bins on both seeds, against 7 and 7 with it) but the
+#: real frames' pixels beside an output crease whose own cell kept its window read
+#: 0.62-0.64x (the real folders 49 -> 43 of 60 bins; 46 with the gate), and the pixels by the
+#: real frames' own creases did not move.
 CREASE_FLOOR = (0.6, 0.6, 20.0)
 #: The near spread ``s_N`` of both noisy maps: cells of the map's grid (the box-fit's is
 #: the pixel grid; the measured support's is mostly the half grid, 6 pixels).
@@ -1243,6 +1243,7 @@ def _support_branch(z, cam, sigma, prof):
     ctx = (*_context(zg, chosen, big_g, cam_g, growth=model[1:]), dev, limit)
     grid = np.empty(zg.shape, dtype=np.float32)  # (a half-grid cell of invalid depth: e_i)
     run_rows(_support_rows, zg.shape[0], zg, chosen, model, ctx, grid, min_rows=rows)
+    # last, the crease floor of the cells that fell back, on the output normals of the grid
     a, far, theta = CREASE_FLOOR
     edges = np.empty((2, *zg.shape), dtype=np.float32)
     run_rows(_cell_edges_rows, zg.shape[0], final, math.degrees(a),
@@ -1327,8 +1328,9 @@ def _edge_rows(edges, i, left, above):
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _floor_rows(v0, v1, edges, dev, limit, out):
-    """Rows ``[v0, v1)`` of the map ``out`` on the pixel grid: at least the largest of the four
-    edges of each pixel (:func:`_cell_edges_rows`, :data:`CREASE_FLOOR`); NaN stays NaN."""
+    """Rows ``[v0, v1)`` of the map ``out`` on the pixel grid: where the pixel fell back
+    (``dev`` past ``limit``), at least the largest of its four edges (:func:`_cell_edges_rows`,
+    :data:`CREASE_FLOOR`), at most :data:`MAX_ERROR`; elsewhere as it was; NaN stays NaN."""
     w = out.shape[1]
     f32 = np.float32
     left = np.empty(w, dtype=f32)
@@ -1353,12 +1355,14 @@ def _floor_rows(v0, v1, edges, dev, limit, out):
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _upsample_rows(v0, v1, coarse, edges, far, dev, limit, z, out):
-    """Rows ``[v0, v1)``: ``out[v, u] = coarse[v // 2, u // 2]``, at least the crease floor of
-    its cell's edges (:func:`_cell_edges_rows`; those the pixel lies on, the left or right and
-    the upper or lower by the parity of ``u`` and ``v``, whole, the other two times ``far``;
-    :data:`CREASE_FLOOR`), NaN where the depth ``z`` is (the branch's normal is NaN exactly
-    there and where its cell's is, whose ``coarse`` is NaN). Every pixel loop runs along a row,
-    without a branch (``x - x`` is 0, or NaN where the depth ``x`` is)."""
+    """Rows ``[v0, v1)``: ``out[v, u] = coarse[v // 2, u // 2]``; where that cell fell back
+    (``dev`` past ``limit``, on the half grid) at least the crease floor of its edges
+    (:func:`_cell_edges_rows`; those the pixel lies on, the left or right and the upper or
+    lower by the parity of ``u`` and ``v``, whole, the other two times ``far``;
+    :data:`CREASE_FLOOR`), at most :data:`MAX_ERROR`; NaN where the depth ``z`` is (the
+    branch's normal is NaN exactly there and where its cell's is, whose ``coarse`` is NaN).
+    Every pixel loop runs along a row, without a branch (``x - x`` is 0, or NaN where the
+    depth ``x`` is)."""
     w = out.shape[1]
     wc = coarse.shape[1]
     h2 = w >> 1
