@@ -64,9 +64,9 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
   branch's choice before its fallback to small windows (session 16,
   :func:`depthnormals.ddm.support._fallback_rows`), the pixels that fell back at
   :data:`FALLBACK_SCALE` times their map, and (session 24) at least a share of the angle
-  between the output normals across their cell's edges (:data:`CREASE_FLOOR`,
-  :func:`_cell_edges_rows`): a pixel at a face boundary that took the wrong face errs by
-  about that angle;
+  between the output normals across each edge of their cell whose neighbour fell back too
+  (:data:`CREASE_FLOOR`, :func:`_cell_edges_rows`): at a face boundary where both fell back,
+  one took the wrong face or both lie between the faces;
 - **clean depth** (the plane hypotheses): the float rounding of the one-pixel stencils
   (``sigma / sqrt(6)``) plus, where the pixel's normal agrees with none of its four neighbours'
   (a facet narrower than two pixels: no one-sided stencil fits), the least angle between them.
@@ -210,24 +210,23 @@ DEPTH_FULL = 0.5
 #: its own, the map mixed with the angle between the normals): kinect_v1 9/9/10/10/9 bins over
 #: seeds 0-4 (was 9/7/10/9/8), the real folders 42 of 60 (was 49), the map past 1.3x.
 FALLBACK_SCALE = 0.8
-#: Measured support, last, where the pixel's cell fell back to small windows: at least ``a A``,
-#: ``A`` the angle (degrees) between the output normals of two adjacent cells of the choice's
-#: grid where it exceeds ``theta``: the edges of the pixel's cell that the pixel lies on at
-#: ``a``, the cell's other edges at ``a w`` (on the pixel grid a pixel lies on all four);
-#: ``CREASE_FLOOR = (a, w, theta)``. A pixel whose depth left its window's plane (a face
-#: boundary) and whose small-window normal differs from its neighbour's by a crease errs by
-#: about that angle where it took the wrong face; no mean over directions (the spreads) reads
-#: it, and the map read such pixels 0.40-0.47x their error (session 24, docs/benchmarks.md
-#: 17: 17.5 / 43.9 deg on the real frames' plane pixels, 20.4 / 45.7 and 23.3 / 50.0 on
-#: synthetic kinect_v1, asset and procedural scenes; with ``a = 0.5`` still 0.76-0.83x, so
-#: 0.6). Without the gate (every pixel by an output crease) the synthetic preset columns
-#: gained more (kinect_v1 6 -> 9 of 10 bins on both seeds, against 7 and 7 with it) but the
-#: real frames' pixels beside an output crease whose own cell kept its window read
-#: 0.62-0.64x (the real folders 49 -> 43 of 60 bins; 46 with the gate), and the pixels by the
-#: real frames' own creases did not move. Within 10 px of those creases the gated floor
-#: over-predicts the pixels it raises (19.3 deg observed, 38.0 read; 20.3 before): there the
-#: sensor rounds the crease and the small windows land between the faces.
-CREASE_FLOOR = (0.6, 0.6, 20.0)
+#: Measured support, last: at least ``a A``, ``A`` the angle (degrees) between the output
+#: normals of two adjacent cells of the choice's grid that both fell back to small windows,
+#: where it exceeds ``theta``: the edges of the pixel's cell that the pixel lies on at ``a``,
+#: the cell's other edges at ``a w`` (on the pixel grid a pixel lies on all four);
+#: ``CREASE_FLOOR = (a, w, theta)``. Two neighbouring cells whose depth both left their
+#: windows' planes (a face boundary) and whose small-window normals differ by a crease: one took
+#: the wrong face, or both lie between the faces, and no mean over directions (the spreads)
+#: reads it. Session 24 (docs/benchmarks.md 17): the pixels it raises read 0.38-0.50x their
+#: error before it on every set measured (observed / predicted 47.6 / 21.6 deg in the real
+#: frames' crease bands, 47.4 / 18.4 on their plane pixels, 50.5 / 22.8 and 54.6 / 27.0 on
+#: synthetic kinect_v1, asset and procedural scenes), 1.02-1.32x with ``a = 0.7``, so 0.8. The
+#: decile bins do not move (the real folders 49 of 60, the preset's columns as before). Gated
+#: on the pixel's own cell only, the floor also raised the pixels across from a cell that kept
+#: its window, which the map already read right or high on every set (16.3 / 30.7 deg in the
+#: real crease bands, 27.9 / 29.1 on the preset): the preset gained 4 bins of 40, the real
+#: folders lost 3; on every pixel by an output crease, +10 and -6.
+CREASE_FLOOR = (0.8, 0.6, 20.0)
 #: The near spread ``s_N`` of both noisy maps: cells of the map's grid (the box-fit's is
 #: the pixel grid; the measured support's is mostly the half grid, 6 pixels).
 NEAR_SPAN = 3
@@ -1245,16 +1244,16 @@ def _support_branch(z, cam, sigma, prof):
     ctx = (*_context(zg, chosen, big_g, cam_g, growth=model[1:]), dev, limit)
     grid = np.empty(zg.shape, dtype=np.float32)  # (a half-grid cell of invalid depth: e_i)
     run_rows(_support_rows, zg.shape[0], zg, chosen, model, ctx, grid, min_rows=rows)
-    # last, the crease floor of the cells that fell back, on the output normals of the grid
+    # last, the crease floor of the edges between two cells that fell back (output normals)
     a, far, theta = CREASE_FLOOR
     edges = np.empty((2, *zg.shape), dtype=np.float32)
     run_rows(_cell_edges_rows, zg.shape[0], final, math.degrees(a),
-             math.cos(math.radians(theta)), edges, min_rows=rows)
+             math.cos(math.radians(theta)), dev, limit, edges, min_rows=rows)
     if not halved:
-        run_rows(_floor_rows, zg.shape[0], edges, dev, limit, grid, min_rows=16)
+        run_rows(_floor_rows, zg.shape[0], edges, grid, min_rows=16)
         return out, grid
     unc = np.empty(z.shape, dtype=np.float32)
-    run_rows(_upsample_rows, z.shape[0], grid, edges, far, dev, limit, z, unc, min_rows=16)
+    run_rows(_upsample_rows, z.shape[0], grid, edges, far, z, unc, min_rows=16)
     return out, unc
 
 
@@ -1279,12 +1278,20 @@ def _crease_into(d, scale, cth, out):
         out[i] = scale * ang if d[i] < cth else f32(0.0)
 
 
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _both_fell(da, db, lim, out):
+    """``out`` kept where both deviations ``da`` and ``db`` exceed ``lim``, else 0."""
+    for i in range(out.size):
+        out[i] = out[i] if (da[i] > lim) & (db[i] > lim) else np.float32(0.0)
+
+
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _cell_edges_rows(v0, v1, normals, scale, cth, out):
+def _cell_edges_rows(v0, v1, normals, scale, cth, dev, limit, out):
     """Rows ``[v0, v1)`` of ``out`` (2, H, W): ``scale`` times the angle (radians; degrees for
     ``scale`` in degrees per radian) between the normals (H, W, 3) of each cell and of the cell
-    to its right (``out[0]``) and below (``out[1]``) where its cosine is below ``cth``; 0
-    elsewhere, on the last column and row and where either is NaN."""
+    to its right (``out[0]``) and below (``out[1]``) where its cosine is below ``cth`` and both
+    cells fell back (deviations ``dev`` (H, W) past ``limit``); 0 elsewhere, on the last column
+    and row and where either normal is NaN."""
     h, w = normals.shape[:2]
     f32 = np.float32
     sc = f32(scale)
@@ -1292,6 +1299,7 @@ def _cell_edges_rows(v0, v1, normals, scale, cth, out):
     cur = np.empty((3, w), dtype=f32)
     nxt = np.empty((3, w), dtype=f32)
     d = np.empty(w, dtype=f32)
+    lim = f32(limit)
     if v0 < v1:
         _planar_row(normals, v0, cur)
     for i in range(v0, v1):
@@ -1302,12 +1310,14 @@ def _cell_edges_rows(v0, v1, normals, scale, cth, out):
         if w > 1:
             _dot_into(x[:w - 1], y[:w - 1], t[:w - 1], x[1:], y[1:], t[1:], d[:w - 1])
             _crease_into(d[:w - 1], sc, ct, right[:w - 1])
+            _both_fell(dev[i, :w - 1], dev[i, 1:], lim, right[:w - 1])
         right[w - 1] = 0.0
         below = out[1, i]
         if i + 1 < h:
             _planar_row(normals, i + 1, nxt)
             _dot_into(x, y, t, nxt[0], nxt[1], nxt[2], d)
             _crease_into(d, sc, ct, below)
+            _both_fell(dev[i], dev[i + 1], lim, below)
             cur, nxt = nxt, cur  # row i + 1 is read once
         else:
             below[:] = 0.0
@@ -1329,39 +1339,36 @@ def _edge_rows(edges, i, left, above):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _floor_rows(v0, v1, edges, dev, limit, out):
-    """Rows ``[v0, v1)`` of the map ``out`` on the pixel grid: where the pixel fell back
-    (``dev`` past ``limit``), at least the largest of its four edges (:func:`_cell_edges_rows`,
-    :data:`CREASE_FLOOR`), at most :data:`MAX_ERROR`; elsewhere as it was; NaN stays NaN."""
+def _floor_rows(v0, v1, edges, out):
+    """Rows ``[v0, v1)`` of the map ``out`` on the pixel grid: at least the largest of the
+    pixel's four edges (:func:`_cell_edges_rows`, :data:`CREASE_FLOOR`; 0 unless the pixel and
+    its neighbour both fell back), at most :data:`MAX_ERROR`; NaN stays NaN."""
     w = out.shape[1]
     f32 = np.float32
     left = np.empty(w, dtype=f32)
     above = np.empty(w, dtype=f32)
     cap = f32(MAX_ERROR)
-    lim = f32(limit)
     for v in range(v0, v1):
         _edge_rows(edges, v, left, above)
         r = edges[0, v]
         b = edges[1, v]
         o = out[v]
-        dv = dev[v]
         for u in range(w):
             e = r[u] if r[u] > left[u] else left[u]
             e = e if e > b[u] else b[u]
             e = e if e > above[u] else above[u]
             e = e if e < cap else cap
-            e = e if dv[u] > lim else f32(0.0)
             m = o[u]
             o[u] = e if e > m else m  # NaN > e is false: NaN stays
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _upsample_rows(v0, v1, coarse, edges, far, dev, limit, z, out):
-    """Rows ``[v0, v1)``: ``out[v, u] = coarse[v // 2, u // 2]``; where that cell fell back
-    (``dev`` past ``limit``, on the half grid) at least the crease floor of its edges
-    (:func:`_cell_edges_rows`; those the pixel lies on, the left or right and the upper or
-    lower by the parity of ``u`` and ``v``, whole, the other two times ``far``;
-    :data:`CREASE_FLOOR`), at most :data:`MAX_ERROR`; NaN where the depth ``z`` is (the
+def _upsample_rows(v0, v1, coarse, edges, far, z, out):
+    """Rows ``[v0, v1)``: ``out[v, u] = coarse[v // 2, u // 2]``, at least the crease floor of
+    that cell's edges (:func:`_cell_edges_rows`, 0 unless both cells across fell back; those
+    the pixel lies on, the left or right and the upper or lower by the parity of ``u`` and
+    ``v``, whole, the other two times ``far``; :data:`CREASE_FLOOR`), at most
+    :data:`MAX_ERROR`; NaN where the depth ``z`` is (the
     branch's normal is NaN exactly there and where its cell's is, whose ``coarse`` is NaN).
     Every pixel loop runs along a row, without a branch (``x - x`` is 0, or NaN where the
     depth ``x`` is)."""
@@ -1374,8 +1381,6 @@ def _upsample_rows(v0, v1, coarse, edges, far, dev, limit, z, out):
     left = np.empty(wc, dtype=f32)
     above = np.empty(wc, dtype=f32)
     cell = np.empty(wc, dtype=f32)  # the cell's floor from all four edges, times far
-    gate = np.empty(wc, dtype=f32)  # 1 where the cell fell back, else 0
-    lim = f32(limit)
     i_prev = -1
     for v in range(v0, v1):
         i = v >> 1
@@ -1389,9 +1394,6 @@ def _upsample_rows(v0, v1, coarse, edges, far, dev, limit, z, out):
                 e = e if e > b[j] else b[j]
                 e = e if e > above[j] else above[j]
                 cell[j] = e * wf
-            dv = dev[i]
-            for j in range(wc):
-                gate[j] = f32(1.0) if dv[j] > lim else f32(0.0)
             i_prev = i
         side = b if v & 1 else above  # the horizontal edge the pixel's row lies on
         zr = z[v]
@@ -1404,10 +1406,10 @@ def _upsample_rows(v0, v1, coarse, edges, far, dev, limit, z, out):
             fc = cell[j]
             e0 = left[j] if left[j] > s else s
             e0 = e0 if e0 > fc else fc
-            e0 = (e0 if e0 < cap else cap) * gate[j]
+            e0 = e0 if e0 < cap else cap
             e1 = r[j] if r[j] > s else s
             e1 = e1 if e1 > fc else fc
-            e1 = (e1 if e1 < cap else cap) * gate[j]
+            e1 = e1 if e1 < cap else cap
             o[2 * j] = (e0 if e0 > cj else cj) + (x - x)  # NaN cj stays NaN
             o[2 * j + 1] = (e1 if e1 > cj else cj) + (y - y)
         if w & 1:
@@ -1415,7 +1417,7 @@ def _upsample_rows(v0, v1, coarse, edges, far, dev, limit, z, out):
             s = side[h2]
             e0 = left[h2] if left[h2] > s else s
             e0 = e0 if e0 > cell[h2] else cell[h2]
-            e0 = (e0 if e0 < cap else cap) * gate[h2]
+            e0 = e0 if e0 < cap else cap
             o[w - 1] = (e0 if e0 > c[h2] else c[h2]) + (x - x)
 
 
