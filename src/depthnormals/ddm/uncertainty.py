@@ -1368,10 +1368,9 @@ def _upsample_rows(v0, v1, coarse, edges, far, z, out):
     that cell's edges (:func:`_cell_edges_rows`, 0 unless both cells across fell back; those
     the pixel lies on, the left or right and the upper or lower by the parity of ``u`` and
     ``v``, whole, the other two times ``far``; :data:`CREASE_FLOOR`), at most
-    :data:`MAX_ERROR`; NaN where the depth ``z`` is (the
-    branch's normal is NaN exactly there and where its cell's is, whose ``coarse`` is NaN).
-    Every pixel loop runs along a row, without a branch (``x - x`` is 0, or NaN where the
-    depth ``x`` is)."""
+    :data:`MAX_ERROR`; NaN where the depth ``z`` is (the branch's normal is NaN exactly there
+    and where its cell's is, whose ``coarse`` is NaN). Every pixel loop runs along a row,
+    without a branch (``x - x`` is 0, or NaN where the depth ``x`` is)."""
     w = out.shape[1]
     wc = coarse.shape[1]
     h2 = w >> 1
