@@ -1258,24 +1258,18 @@ def _support_branch(z, cam, sigma, prof):
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _dot_into(x, y, t, a, b, c, out):
-    """``out = x a + y b + t c`` elementwise (NaN where either normal is)."""
-    for i in range(out.size):
-        out[i] = x[i] * a[i] + y[i] * b[i] + t[i] * c[i]
-
-
-@nb.njit(cache=True, error_model="numpy", inline="always")
-def _crease_into(d, scale, cth, out):
-    """``out = scale`` times the angle (radians) of the cosines ``d`` where below ``cth``, else 0
-    (NaN too): ``2 asin(k / 2) ~ k + k^3 / 24 + 3 k^5 / 640`` of the chord ``k`` (0.8 % low at
-    90 deg)."""
+def _crease_into(x, y, t, a, b, c, scale, cth, out):
+    """``out = scale`` times the angle (radians) between the normals (x, y, t) and (a, b, c)
+    where its cosine is below ``cth``, else 0 (NaN too): ``2 asin(k / 2) ~ k + k^3 / 24 + 3 k^5
+    / 640`` of the chord ``k`` (0.8 % low at 90 deg)."""
     f32 = np.float32
     for i in range(out.size):
-        c2 = f32(2.0) - f32(2.0) * d[i]
+        d = x[i] * a[i] + y[i] * b[i] + t[i] * c[i]
+        c2 = f32(2.0) - f32(2.0) * d
         c2 = c2 if c2 > f32(0.0) else f32(0.0)
         k = np.sqrt(c2)
         ang = k + k * c2 * (f32(1.0 / 24.0) + c2 * f32(3.0 / 640.0))
-        out[i] = scale * ang if d[i] < cth else f32(0.0)
+        out[i] = scale * ang if d < cth else f32(0.0)
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -1298,7 +1292,6 @@ def _cell_edges_rows(v0, v1, normals, scale, cth, dev, limit, out):
     ct = f32(cth)
     cur = np.empty((3, w), dtype=f32)
     nxt = np.empty((3, w), dtype=f32)
-    d = np.empty(w, dtype=f32)
     lim = f32(limit)
     if v0 < v1:
         _planar_row(normals, v0, cur)
@@ -1308,15 +1301,14 @@ def _cell_edges_rows(v0, v1, normals, scale, cth, dev, limit, out):
         t = cur[2]
         right = out[0, i]
         if w > 1:
-            _dot_into(x[:w - 1], y[:w - 1], t[:w - 1], x[1:], y[1:], t[1:], d[:w - 1])
-            _crease_into(d[:w - 1], sc, ct, right[:w - 1])
+            _crease_into(x[:w - 1], y[:w - 1], t[:w - 1], x[1:], y[1:], t[1:], sc, ct,
+                         right[:w - 1])
             _both_fell(dev[i, :w - 1], dev[i, 1:], lim, right[:w - 1])
         right[w - 1] = 0.0
         below = out[1, i]
         if i + 1 < h:
             _planar_row(normals, i + 1, nxt)
-            _dot_into(x, y, t, nxt[0], nxt[1], nxt[2], d)
-            _crease_into(d, sc, ct, below)
+            _crease_into(x, y, t, nxt[0], nxt[1], nxt[2], sc, ct, below)
             _both_fell(dev[i], dev[i + 1], lim, below)
             cur, nxt = nxt, cur  # row i + 1 is read once
         else:
@@ -1338,6 +1330,17 @@ def _edge_rows(edges, i, left, above):
         above[:] = 0.0
 
 
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _four_max_into(r, left, b, above, scale, out):
+    """``out = scale max(r, left, b, above)`` elementwise: a cell's four edges
+    (:func:`_edge_rows`)."""
+    for j in range(out.size):
+        e = r[j] if r[j] > left[j] else left[j]
+        e = e if e > b[j] else b[j]
+        e = e if e > above[j] else above[j]
+        out[j] = e * scale
+
+
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _floor_rows(v0, v1, edges, out):
     """Rows ``[v0, v1)`` of the map ``out`` on the pixel grid: at least the largest of the
@@ -1347,17 +1350,14 @@ def _floor_rows(v0, v1, edges, out):
     f32 = np.float32
     left = np.empty(w, dtype=f32)
     above = np.empty(w, dtype=f32)
+    four = np.empty(w, dtype=f32)
     cap = f32(MAX_ERROR)
     for v in range(v0, v1):
         _edge_rows(edges, v, left, above)
-        r = edges[0, v]
-        b = edges[1, v]
+        _four_max_into(edges[0, v], left, edges[1, v], above, f32(1.0), four)
         o = out[v]
         for u in range(w):
-            e = r[u] if r[u] > left[u] else left[u]
-            e = e if e > b[u] else b[u]
-            e = e if e > above[u] else above[u]
-            e = e if e < cap else cap
+            e = four[u] if four[u] < cap else cap
             m = o[u]
             o[u] = e if e > m else m  # NaN > e is false: NaN stays
 
@@ -1388,11 +1388,7 @@ def _upsample_rows(v0, v1, coarse, edges, far, z, out):
         b = edges[1, i]
         if i != i_prev:
             _edge_rows(edges, i, left, above)
-            for j in range(wc):
-                e = r[j] if r[j] > left[j] else left[j]
-                e = e if e > b[j] else b[j]
-                e = e if e > above[j] else above[j]
-                cell[j] = e * wf
+            _four_max_into(r, left, b, above, wf, cell)
             i_prev = i
         side = b if v & 1 else above  # the horizontal edge the pixel's row lies on
         zr = z[v]
