@@ -31,6 +31,11 @@ Columns:
   ``synth-rest/<variant>`` the others (a diagnosis: a column whose deciles pass may pass by
   the mix of pixels the map reads too low and too high, and a set of other scenes mixes them
   otherwise);
+- with ``--thin``, each synthetic sensor column split by the faces narrower than the
+  estimator resolves (:func:`thin_labels` on the exact normals): ``synth-thin/<variant>`` the
+  pixels within :data:`THIN_PX` px of a face at most 5 px across (a riser, a board's edge, a
+  leg), ``synth-resolved/<variant>`` the others (a diagnosis: no window holds such a face,
+  and no depth-only map can place it; the targets are read on the whole column);
 - with ``--min-fraction F``, the real references keep planes down to ``F`` of the image
   (``plane_reference``'s ``min_fraction``, default 0.01): 0.0025 adds faces such as a table's
   front or a box's side, which the default leaves out (a diagnosis: the targets are read on
@@ -46,7 +51,7 @@ Columns:
   is found on the plane reference of its noisy depth and scored against the exact normals.
 
     python benchmarks/uncertainty_calibration.py [--method 3f2n+] [--synth /tmp/u-synth ...]
-        [--real ../shared/data/real-sensors] [--planes] [--by-crease] [--min-fraction F]
+        [--real ../shared/data/real-sensors] [--planes] [--by-crease] [--thin] [--min-fraction F]
         [--creases] [--json OUT]
         [--figure PNG] [--bootstrap N] [--leave-one-out] [--frames N] [--speed]
 
@@ -297,6 +302,47 @@ def geometry_labels(clean: np.ndarray, normals: np.ndarray) -> np.ndarray:
     return out
 
 
+#: ``--thin``: a pixel whose exact normal is over ``THIN_DEG`` from the exact normals ``k`` px
+#: before and ``k`` px after it along a row or a column, for a ``k`` of ``THIN_SPANS``, lies on
+#: a face at most ``2 max(THIN_SPANS) - 1`` px across; the pixels within ``THIN_PX`` px of one
+#: (the chessboard distance) make the column's thin part.
+THIN_DEG, THIN_SPANS, THIN_PX = 30.0, (2, 3), 3
+
+
+def thin_labels(normals: np.ndarray) -> np.ndarray:
+    """Per pixel of a synthetic view (its exact normals (H, W, 3), NaN where no surface): True
+    within :data:`THIN_PX` px of a pixel on a face narrower than about 5 px (its normal over
+    :data:`THIN_DEG` deg from the normals :data:`THIN_SPANS` px away on both sides along a row
+    or a column; no surface there counts as another face, the image's border as none) (bool
+    (H, W))."""
+    from depthnormals.evaluate._creases import _reach  # the crease bands' chessboard distance
+
+    g = np.asarray(normals, dtype=np.float64)
+    h, w = g.shape[:2]
+    cos = np.cos(np.radians(THIN_DEG))
+    thin = np.zeros((h, w), dtype=bool)
+    for k in THIN_SPANS:
+        for axis in (0, 1):
+            n = g.shape[axis]
+            if n <= 2 * k:
+                continue
+            a = np.take(g, range(k, n), axis=axis)  # the pixel, k after the first
+            b = np.take(g, range(n - k), axis=axis)  # the pixel k before it
+            with np.errstate(invalid="ignore"):
+                other = ~((a * b).sum(-1) >= cos)  # NaN: no surface, another face
+            before = np.zeros((h, w), dtype=bool)
+            after = np.zeros((h, w), dtype=bool)
+            if axis == 0:
+                before[k:] = other
+                after[:-k] = other
+            else:
+                before[:, k:] = other
+                after[:, :-k] = other
+            thin |= before & after
+    thin &= np.isfinite(g).all(-1)
+    return _reach(thin, THIN_PX) <= THIN_PX
+
+
 #: Distance bins (px from the crease line) of the crease-band profile (``--creases``).
 BAND_EDGES = (0.0, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 10.0 + 1e-9)
 
@@ -377,14 +423,16 @@ def analytic_columns(method: str, noise: float, seed: int) -> dict[str, Column]:
 
 def synth_columns(root: Path | list[Path], method: str, planes: bool = False, seed: int = 0,
                   profiles: dict[str, BandProfile] | None = None,
-                  by_crease: bool = False) -> dict[str, Column]:
+                  by_crease: bool = False, thin: bool = False) -> dict[str, Column]:
     """One column per sensor model of the synthetic folder ``root`` (several: their frames
     pooled, each named by its folder); with ``planes`` also
     its pixels on and off the plane reference of the noisy depth (module doc); with
     ``profiles`` (a dict), the crease-band profile of each noisy model, the band found on the
     noisy depth's plane reference and scored against the exact normals; with ``by_crease``,
     its pixels by a crease, by a jump and the rest (:func:`geometry_labels` on the view's
-    clean depth, which a set holds before its noisy variants; a view without one raises)."""
+    clean depth, which a set holds before its noisy variants; a view without one raises); with
+    ``thin``, its pixels by a face narrower than about 5 px and the others (:func:`thin_labels`
+    on the exact normals)."""
     from depthnormals.datasets.synthetic import read_synthetic
     from depthnormals.evaluate import crease_band, plane_reference, sensor_threshold
 
@@ -418,6 +466,11 @@ def synth_columns(root: Path | list[Path], method: str, planes: bool = False, se
             for kind, code in (("synth-crease", 2), ("synth-jump", 1), ("synth-rest", 0)):
                 cols.setdefault(f"{kind}/{variant}", Column()).add(
                     u, err, valid & (labels[1] == code), name=name)
+        if thin and variant != "clean":
+            near = thin_labels(f.normals)
+            for kind, part in (("synth-thin", near), ("synth-resolved", ~near)):
+                cols.setdefault(f"{kind}/{variant}", Column()).add(u, err, valid & part,
+                                                                   name=name)
     return cols
 
 
@@ -498,12 +551,13 @@ def speed(method: str, synth: Path | None, real: str, repeats: int = 25) -> None
         print(f"all frames: x{total[1] / total[0]:.2f}")
 
 
-SYNTH_KINDS = ("synth", "synth-planes", "synth-off", "synth-crease", "synth-jump", "synth-rest")
+SYNTH_KINDS = ("synth", "synth-planes", "synth-off", "synth-crease", "synth-jump", "synth-rest",
+               "synth-thin", "synth-resolved")
 
 
 def _order(name: str) -> tuple:
     """Columns in print order: analytic, then per sensor model all, on and off planes, by a
-    crease, by a jump and the rest (:data:`SYNTH_KINDS`)."""
+    crease, by a jump and the rest, by a thin face and the rest (:data:`SYNTH_KINDS`)."""
     kind, _, variant = name.partition("/")
     return (kind != "analytic", variant, SYNTH_KINDS.index(kind) if kind.startswith("synth")
             else 0)
@@ -592,6 +646,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--by-crease", action="store_true",
                     help="also score each synthetic column's pixels by a crease, by a jump and "
                          "the rest (the exact geometry of the view)")
+    ap.add_argument("--thin", action="store_true",
+                    help="also score each synthetic column's pixels within 3 px of a face "
+                         "narrower than about 5 px and the others (the exact normals)")
     ap.add_argument("--min-fraction", type=float, default=None,
                     help="the real plane references' smallest plane, a share of the image "
                          "(plane_reference's default 0.01; smaller: faces the default leaves out)")
@@ -626,7 +683,8 @@ def main(argv: list[str] | None = None) -> int:
     cols = analytic_columns(a.method, a.noise, a.seed)
     profiles: dict[str, BandProfile] | None = {} if a.creases else None
     if a.synth is not None:
-        cols.update(synth_columns(a.synth, a.method, a.planes, a.seed, profiles, a.by_crease))
+        cols.update(synth_columns(a.synth, a.method, a.planes, a.seed, profiles, a.by_crease,
+                                  a.thin))
         cols = dict(sorted(cols.items(), key=lambda kv: _order(kv[0])))
     if a.real:
         cols.update(real_columns(Path(a.real), a.method, a.seed, a.min_fraction, a.creases,

@@ -983,6 +983,65 @@ def test_calibration_bench_splits_synthetic_by_crease(tmp_path, load_benchmark, 
     assert "synth/kinect_v1" in bench.synth_columns(tmp_path, "3f2n+")  # without the split: fine
 
 
+def test_calibration_bench_thin_labels_a_riser_and_a_post(load_benchmark):
+    """``thin_labels`` (``--thin``): on a face of one normal, a riser 3 rows tall (80 deg off)
+    and a post 2 columns wide (60 deg off, rows 42..47) are faces narrower than 5 px: they and
+    the pixels within 3 px of them read True; a band 10 rows tall (80 deg off, its two creases
+    with the face) and the rest read False; without the post (its columns the face's) and with
+    a 20 deg riser, nothing is thin."""
+    bench = load_benchmark("uncertainty_calibration")
+    assert (bench.THIN_DEG, bench.THIN_SPANS, bench.THIN_PX) == (30.0, (2, 3), 3)
+    h, w = 48, 40
+
+    def tilt(deg):
+        t = np.radians(deg)
+        return (0.0, -np.sin(t), -np.cos(t))
+
+    def scene(riser_deg, post):
+        n = np.zeros((h, w, 3))
+        n[..., 2] = -1.0
+        n[10:13] = tilt(riser_deg)
+        n[24:34] = tilt(80.0)
+        if post:
+            n[42:, 30:32] = (np.sin(np.radians(60.0)), 0.0, -np.cos(np.radians(60.0)))
+        return n.astype(np.float32)
+
+    lab = bench.thin_labels(scene(80.0, True))
+    want = np.zeros((h, w), dtype=bool)
+    want[7:16] = True  # the riser's rows 10-12 and 3 either side
+    want[39:, 27:35] = True  # the post's columns 30-31, rows 42-47, and 3 px around
+    np.testing.assert_array_equal(lab, want)
+    np.testing.assert_array_equal(bench.thin_labels(scene(20.0, False)), False)
+    # no surface beside a pixel is another face: one valid column between two empty ones
+    n = np.full((h, w, 3), np.nan, dtype=np.float32)
+    n[:, 20] = (0.0, 0.0, -1.0)
+    lab = bench.thin_labels(n)
+    assert lab[:, 17:24].all() and not lab[:, :17].any() and not lab[:, 24:].any()
+
+
+def test_calibration_bench_splits_synthetic_by_thin_faces(tmp_path, load_benchmark):
+    """``--thin``: each noisy column's pixels by a thin face and the others are exactly the
+    column (none lost or counted twice, the frames named as the column's); the clean column
+    is not split."""
+    from depthnormals.camera import Intrinsics
+    from depthnormals.synth import generate
+
+    generate(tmp_path, indoor=1, outdoor=0, views=2, seed=3, K=Intrinsics(91.375, 91.375, 63.5, 52.5),
+             size=(106, 128), progress=False, noise=("kinect_v1",))
+    bench = load_benchmark("uncertainty_calibration")
+    cols = bench.synth_columns(tmp_path, "3f2n+", thin=True)
+    parts = ("synth-thin/kinect_v1", "synth-resolved/kinect_v1")
+    assert set(cols) == {"synth/clean", "synth/kinect_v1", *parts}
+    whole = cols["synth/kinect_v1"]
+    assert cols["synth-resolved/kinect_v1"].summary()["pixels"] > 0
+    for j in range(2):
+        assert all(cols[k].names[j] == whole.names[j] for k in parts)
+        np.testing.assert_array_equal(np.sort(np.concatenate([cols[k].pred[j] for k in parts])),
+                                      np.sort(whole.pred[j]))
+    assert bench._order("synth-rest/kinect_v1") < bench._order("synth-thin/kinect_v1") < \
+        bench._order("synth-resolved/kinect_v1")
+
+
 def test_calibration_bench_pools_several_synthetic_folders(tmp_path, load_benchmark):
     """``--synth A B``: each sensor column holds the frames of both folders, its pixels
     exactly the sum of the two folders' (none lost or counted twice), the frames named by
