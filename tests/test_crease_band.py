@@ -114,16 +114,6 @@ def test_score_creases_near_and_far():
         score_creases(r.normals[:-1], band)
 
 
-def test_examples_in_the_docstrings():
-    """The module's examples run as written (the suite runs no doctests elsewhere)."""
-    import doctest
-
-    from depthnormals.evaluate import _creases
-
-    result = doctest.testmod(_creases)
-    assert result.attempted >= 8 and result.failed == 0
-
-
 def test_integer_depth_and_a_frame_without_planes():
     """Millimetre depth with ``depth_scale`` gives the band of the metric depth (within a pixel
     of rounding); a frame without planes (uniform random depth) an empty band, scored as NaN
