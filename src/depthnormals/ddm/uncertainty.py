@@ -1341,6 +1341,14 @@ def _four_max_into(r, left, b, above, scale, out):
         out[j] = e * scale
 
 
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _capped_max3(a, b, c, cap):
+    """``min(max(a, b, c), cap)`` (a pixel's crease floor from the edges it reads)."""
+    e = a if a > b else b
+    e = e if e > c else c
+    return e if e < cap else cap
+
+
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _floor_rows(v0, v1, edges, out):
     """Rows ``[v0, v1)`` of the map ``out`` on the pixel grid: at least the largest of the
@@ -1399,20 +1407,13 @@ def _upsample_rows(v0, v1, coarse, edges, far, z, out):
             cj = c[j]
             s = side[j]
             fc = cell[j]
-            e0 = left[j] if left[j] > s else s
-            e0 = e0 if e0 > fc else fc
-            e0 = e0 if e0 < cap else cap
-            e1 = r[j] if r[j] > s else s
-            e1 = e1 if e1 > fc else fc
-            e1 = e1 if e1 < cap else cap
+            e0 = _capped_max3(left[j], s, fc, cap)
+            e1 = _capped_max3(r[j], s, fc, cap)
             o[2 * j] = (e0 if e0 > cj else cj) + (x - x)  # NaN cj stays NaN
             o[2 * j + 1] = (e1 if e1 > cj else cj) + (y - y)
         if w & 1:
             x = zr[w - 1]
-            s = side[h2]
-            e0 = left[h2] if left[h2] > s else s
-            e0 = e0 if e0 > cell[h2] else cell[h2]
-            e0 = e0 if e0 < cap else cap
+            e0 = _capped_max3(left[h2], side[h2], cell[h2], cap)
             o[w - 1] = (e0 if e0 > c[h2] else c[h2]) + (x - x)
 
 
