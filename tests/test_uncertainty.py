@@ -1234,6 +1234,19 @@ def test_calibration_bench_refuses_a_bad_min_fraction(tmp_path, monkeypatch, loa
     assert f"--min-fraction {float(value)}: must be in" in capsys.readouterr().err
 
 
+def test_calibration_bench_targets_the_pooled_real_frames_and_each_folder(load_benchmark):
+    """The issue's targets: Spearman 0.6 and every bin on each noisy synthetic column (of any
+    set), 0.5 on the real frames pooled and, the stricter reading, on each folder; the
+    diagnostic splits and the crease bands hold none."""
+    bench = load_benchmark("uncertainty_calibration")
+    assert bench.target("real") == 0.5
+    assert bench.target("real/tum_fr2_kinect1_slambook") == 0.5
+    assert bench.target("synth/kinect_v1") == bench.target("synth/realsense_d4xx") == 0.6
+    for name in ("real+creases", "real+creases/sunrgbd_open3d", "synth/clean",
+                 "synth/gaussian", "synth-thin/kinect_v1", "synth-planes/tof", "analytic"):
+        assert bench.target(name) is None, name
+
+
 def test_calibration_bench_bootstrap_bins_as_the_table(load_benchmark):
     """``--bootstrap``: frames resampled with replacement, each resample binned like the
     table. Two identical frames give every resample the table's own ratios (so the binning is
