@@ -1235,9 +1235,9 @@ def test_calibration_bench_refuses_a_bad_min_fraction(tmp_path, monkeypatch, loa
 
 
 def test_calibration_bench_targets_the_pooled_real_frames_and_each_folder(load_benchmark):
-    """The issue's targets: Spearman 0.6 and every bin on each noisy synthetic column (of any
-    set), 0.5 on the real frames pooled and, the stricter reading, on each folder; the
-    diagnostic splits and the crease bands hold none."""
+    """The issue's targets: Spearman 0.6 and every bin on the synthetic column of each of the
+    four sensor models (of any set), 0.5 on the real frames pooled and, the stricter reading,
+    on each folder; gaussian noise, the diagnostic splits and the crease bands hold none."""
     bench = load_benchmark("uncertainty_calibration")
     assert bench.target("real") == 0.5
     assert bench.target("real/tum_fr2_kinect1_slambook") == 0.5
