@@ -22,7 +22,10 @@ Columns:
   ``synth-planes/<variant>`` the pixels of the plane reference found on the noisy depth
   (interiors and rims, the structured-light threshold) and ``synth-off/<variant>`` the rest,
   both against the exact normals (no target: a diagnosis of where the map misses, the real
-  frames having no reference off their planes);
+  frames having no reference off their planes), and ``synth-asreal/<variant>`` the same
+  pixels against the reference's own normals, as the real frames are scored (no target: how
+  far that scoring reads the same map otherwise; near a crease the reference, fitted to the
+  same depth, can take the same wrong face as the estimate);
 - with ``--by-crease``, each synthetic sensor column split by the exact geometry of its view
   (:func:`geometry_labels` on the clean depth and the exact normals): ``synth-crease/<variant>``
   the pixels within :data:`CREASE_PX` px of a crease (adjacent exact normals over
@@ -463,6 +466,9 @@ def synth_columns(root: Path | list[Path], method: str, planes: bool = False, se
             on = ref.interior | ref.rim
             cols.setdefault(f"synth-planes/{variant}", Column()).add(u, err, valid & on)
             cols.setdefault(f"synth-off/{variant}", Column()).add(u, err, valid & ~on)
+            cols.setdefault(f"synth-asreal/{variant}", Column()).add(
+                u, dn.angular_error(n, reference_normals(ref).astype(np.float32)), valid & on,
+                name=name)
         if by_crease and variant != "clean":
             if labels[0] != view:
                 raise ValueError(f"--by-crease: {folder}/{f.group}/{f.name} has no clean "
@@ -476,6 +482,16 @@ def synth_columns(root: Path | list[Path], method: str, planes: bool = False, se
                 cols.setdefault(f"{kind}/{variant}", Column()).add(u, err, valid & part,
                                                                    name=name)
     return cols
+
+
+def reference_normals(ref) -> np.ndarray:
+    """The normal of each pixel's plane in a plane reference (``plane_reference``), NaN where
+    it labels none (float64 (H, W, 3))."""
+    lab = ref.labels
+    g = np.full((*lab.shape, 3), np.nan, dtype=np.float64)
+    has = lab >= 0
+    g[has] = ref.normals[lab[has]]
+    return g
 
 
 def real_columns(root: Path, method: str, seed: int, min_fraction: float | None = None,
@@ -492,10 +508,7 @@ def real_columns(root: Path, method: str, seed: int, min_fraction: float | None 
         ref = plane_reference(f.depth, f.K, seed=seed, threshold=sensor_threshold(f.meta),
                               **more)
         n, u = dn.estimate_normals(f.depth, f.K, method=method, return_uncertainty=True)
-        lab = ref.labels
-        g = np.full(n.shape, np.nan, dtype=np.float64)
-        has = lab >= 0
-        g[has] = ref.normals[lab[has]]
+        g = reference_normals(ref)
         err = dn.angular_error(n, g.astype(np.float32))
         mask = ref.interior | ref.rim
         group = str(f.group).split("/")[0]
@@ -555,8 +568,8 @@ def speed(method: str, synth: Path | None, real: str, repeats: int = 25) -> None
         print(f"all frames: x{total[1] / total[0]:.2f}")
 
 
-SYNTH_KINDS = ("synth", "synth-planes", "synth-off", "synth-crease", "synth-jump", "synth-rest",
-               "synth-thin", "synth-resolved")
+SYNTH_KINDS = ("synth", "synth-planes", "synth-off", "synth-asreal", "synth-crease", "synth-jump",
+               "synth-rest", "synth-thin", "synth-resolved")
 
 
 def _order(name: str) -> tuple:
@@ -607,7 +620,7 @@ def _figure(results: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     names = [k for k, v in results.items()
-             if v["bins"] and not k.startswith(("synth-planes/", "synth-off/"))]
+             if v["bins"] and not k.startswith(("synth-planes/", "synth-off/", "synth-asreal/"))]
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 5))
     top = 0.0
     for k in names:

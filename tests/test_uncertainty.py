@@ -897,7 +897,10 @@ def test_calibration_bench_splits_synthetic_on_and_off_planes(tmp_path, load_ben
     """``benchmarks/uncertainty_calibration.py --planes``: each noisy synthetic column is
     split into the pixels of the plane reference found on its noisy depth and the rest, so the
     two together are exactly the column (no pixel lost or counted twice), the clean column is
-    not split, and both parts of a room scene have pixels."""
+    not split, and both parts of a room scene have pixels; ``synth-asreal`` holds the plane
+    pixels scored as the real frames are, against the reference's own normals (its mean
+    observed error that of the estimate against ``reference_normals``, not the exact
+    normals')."""
     from depthnormals.camera import Intrinsics
     from depthnormals.synth import generate
 
@@ -906,13 +909,33 @@ def test_calibration_bench_splits_synthetic_on_and_off_planes(tmp_path, load_ben
     bench = load_benchmark("uncertainty_calibration")
     cols = {k: c.summary() for k, c in bench.synth_columns(tmp_path, "3f2n+", planes=True).items()}
     assert set(cols) == {"synth/clean", "synth/kinect_v1", "synth-planes/kinect_v1",
-                         "synth-off/kinect_v1"}
+                         "synth-off/kinect_v1", "synth-asreal/kinect_v1"}
     on, off = cols["synth-planes/kinect_v1"]["pixels"], cols["synth-off/kinect_v1"]["pixels"]
     assert on > 0 and off > 0
     assert on + off == cols["synth/kinect_v1"]["pixels"]
     assert [bench._order(k) < bench._order(j) for k, j in
             (("analytic", "synth/kinect_v1"), ("synth/kinect_v1", "synth-planes/kinect_v1"),
-             ("synth-planes/kinect_v1", "synth-off/kinect_v1"))] == [True] * 3
+             ("synth-planes/kinect_v1", "synth-off/kinect_v1"),
+             ("synth-off/kinect_v1", "synth-asreal/kinect_v1"))] == [True] * 4
+    # the same pixels and predictions, scored against the reference (recomputed here)
+    from depthnormals.datasets.synthetic import read_synthetic
+    from depthnormals.evaluate import plane_reference, sensor_threshold
+
+    f = next(f for f in read_synthetic(tmp_path) if f.group.endswith("kinect_v1"))
+    ref = plane_reference(f.depth, f.K, seed=0, threshold=sensor_threshold({}))
+    n, u = dn.estimate_normals(f.depth, f.K, return_uncertainty=True)
+    g = bench.reference_normals(ref)
+    assert g.shape == n.shape and np.isnan(g[ref.labels < 0]).all()
+    assert np.array_equal(g[ref.labels == 0], np.broadcast_to(ref.normals[0], g[ref.labels == 0].shape))
+    err = dn.angular_error(n, g.astype(np.float32))
+    keep = (ref.interior | ref.rim) & np.isfinite(u) & np.isfinite(err)
+    real_like = cols["synth-asreal/kinect_v1"]
+    assert real_like["pixels"] == keep.sum() == on
+    assert real_like["mean_observed"] == pytest.approx(float(err[keep].astype(np.float64).mean()),
+                                                       rel=1e-12)
+    assert real_like["mean_predicted"] == cols["synth-planes/kinect_v1"]["mean_predicted"]
+    exact = cols["synth-planes/kinect_v1"]["mean_observed"]
+    assert abs(real_like["mean_observed"] - exact) > 1e-3 * exact  # not the exact normals
 
 
 def test_calibration_bench_geometry_labels_a_crease_and_a_jump(load_benchmark):
