@@ -25,7 +25,12 @@ Columns:
   frames having no reference off their planes), and ``synth-asreal/<variant>`` the same
   pixels against the reference's own normals, as the real frames are scored (no target: how
   far that scoring reads the same map otherwise; near a crease the reference, fitted to the
-  same depth, can take the same wrong face as the estimate);
+  same depth, can take the same wrong face as the estimate), with per sensor model, on the
+  reference's interiors and rims, the share of pixels whose reference normal is over
+  :data:`WRONG_DEG` deg from the exact one, whose estimate is over it from the exact one or
+  from the reference, and whose estimate and reference are off the same way (the reference
+  over :data:`WRONG_DEG` deg off, the estimate within :data:`SAME_DEG` deg of it: an error
+  the real frames' scoring cannot see);
 - with ``--by-crease``, each synthetic sensor column split by the exact geometry of its view
   (:func:`geometry_labels` on the clean depth and the exact normals): ``synth-crease/<variant>``
   the pixels within :data:`CREASE_PX` px of a crease (adjacent exact normals over
@@ -379,6 +384,41 @@ class BandProfile:
         return out
 
 
+#: ``--planes``: a normal over ``WRONG_DEG`` from another took the other face, in effect; an
+#: estimate within ``SAME_DEG`` of a reference that did took the same one.
+WRONG_DEG, SAME_DEG = 30.0, 10.0
+
+
+class ReferenceAgreement:
+    """Per part of a plane reference (interiors, rims): pixels, and those whose reference is
+    over :data:`WRONG_DEG` deg from the exact normal, whose estimate is over it from the exact
+    normal and from the reference, and whose estimate and reference are off the same way."""
+
+    PARTS = ("interior", "rim")
+
+    def __init__(self) -> None:
+        self.counts = np.zeros((len(self.PARTS), 5), dtype=np.int64)
+
+    def add(self, err_exact: np.ndarray, err_ref: np.ndarray, ref_exact: np.ndarray,
+            parts: tuple[np.ndarray, np.ndarray]) -> None:
+        ok = np.isfinite(err_exact) & np.isfinite(err_ref) & np.isfinite(ref_exact)
+        ref_off = ref_exact > WRONG_DEG
+        for i, part in enumerate(parts):
+            m = ok & part
+            self.counts[i] += (int(m.sum()), int((m & ref_off).sum()),
+                               int((m & (err_exact > WRONG_DEG)).sum()),
+                               int((m & (err_ref > WRONG_DEG)).sum()),
+                               int((m & ref_off & (err_ref <= SAME_DEG)).sum()))
+
+    def rows(self) -> dict:
+        out = {}
+        for part, (n, *k) in zip(self.PARTS, self.counts.tolist(), strict=True):
+            share = [x / n if n else float("nan") for x in k]
+            out[part] = {"pixels": n, "reference_off": share[0], "estimate_off_exact": share[1],
+                         "estimate_off_reference": share[2], "off_the_same_way": share[3]}
+        return out
+
+
 class Column:
     """The (prediction, observation) pairs of one column."""
 
@@ -430,7 +470,8 @@ def analytic_columns(method: str, noise: float, seed: int) -> dict[str, Column]:
 
 def synth_columns(root: Path | list[Path], method: str, planes: bool = False, seed: int = 0,
                   profiles: dict[str, BandProfile] | None = None,
-                  by_crease: bool = False, thin: bool = False) -> dict[str, Column]:
+                  by_crease: bool = False, thin: bool = False,
+                  agreement: dict[str, ReferenceAgreement] | None = None) -> dict[str, Column]:
     """One column per sensor model of the synthetic folder ``root`` (several: their frames
     pooled, each named by its folder); with ``planes`` also
     its pixels on and off the plane reference of the noisy depth (module doc); with
@@ -439,7 +480,8 @@ def synth_columns(root: Path | list[Path], method: str, planes: bool = False, se
     its pixels by a crease, by a jump and the rest (:func:`geometry_labels` on the view's
     clean depth, which a set holds before its noisy variants; a view without one raises); with
     ``thin``, its pixels by a face narrower than about 5 px and the others (:func:`thin_labels`
-    on the exact normals)."""
+    on the exact normals); with ``planes`` and ``agreement`` (a dict), the plane reference
+    against the exact normals and the estimate per noisy model (:class:`ReferenceAgreement`)."""
     from depthnormals.datasets.synthetic import read_synthetic
     from depthnormals.evaluate import crease_band, plane_reference, sensor_threshold
 
@@ -466,9 +508,14 @@ def synth_columns(root: Path | list[Path], method: str, planes: bool = False, se
             on = ref.interior | ref.rim
             cols.setdefault(f"synth-planes/{variant}", Column()).add(u, err, valid & on)
             cols.setdefault(f"synth-off/{variant}", Column()).add(u, err, valid & ~on)
-            cols.setdefault(f"synth-asreal/{variant}", Column()).add(
-                u, dn.angular_error(n, reference_normals(ref).astype(np.float32)), valid & on,
-                name=name)
+            g = reference_normals(ref).astype(np.float32)
+            err_ref = dn.angular_error(n, g)
+            cols.setdefault(f"synth-asreal/{variant}", Column()).add(u, err_ref, valid & on,
+                                                                     name=name)
+            if agreement is not None:
+                agreement.setdefault(f"synth/{variant}", ReferenceAgreement()).add(
+                    err, err_ref, dn.angular_error(g, f.normals),
+                    (valid & ref.interior, valid & ref.rim))
         if by_crease and variant != "clean":
             if labels[0] != view:
                 raise ValueError(f"--by-crease: {folder}/{f.group}/{f.name} has no clean "
@@ -699,9 +746,10 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     cols = analytic_columns(a.method, a.noise, a.seed)
     profiles: dict[str, BandProfile] | None = {} if a.creases else None
+    agreement: dict[str, ReferenceAgreement] = {}
     if a.synth is not None:
         cols.update(synth_columns(a.synth, a.method, a.planes, a.seed, profiles, a.by_crease,
-                                  a.thin))
+                                  a.thin, agreement))
         cols = dict(sorted(cols.items(), key=lambda kv: _order(kv[0])))
     if a.real:
         cols.update(real_columns(Path(a.real), a.method, a.seed, a.min_fraction, a.creases,
@@ -718,6 +766,17 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {k:24s} " + "  ".join(
                 f"{r['from_px']:g}-{r['to_px']:g}: {r['pixels']} {r['observed']:.1f}/"
                 f"{r['predicted']:.1f} {100 * r['over_45']:.0f}%" for r in rows))
+    refs = {k: r.rows() for k, r in agreement.items()}
+    if refs:
+        print(f"\nplane references of the noisy depth (--planes): pixels, share whose reference is "
+              f"over {WRONG_DEG:g} deg from the exact normal, whose estimate is over it from the "
+              f"exact normal / from the reference, and whose estimate lies within {SAME_DEG:g} "
+              "deg of a reference that is (off the same way)")
+        for k, parts in refs.items():
+            print(f"  {k:24s} " + "  ".join(
+                f"{part}: {r['pixels']} {100 * r['reference_off']:.2f}% "
+                f"{100 * r['estimate_off_exact']:.2f}% / {100 * r['estimate_off_reference']:.2f}% "
+                f"same {100 * r['off_the_same_way']:.2f}%" for part, r in parts.items()))
     print("\nsummary: column, Spearman, bins passed, target (every bin; Spearman)")
     for k, s in results.items():
         t = target(k)
@@ -735,7 +794,8 @@ def main(argv: list[str] | None = None) -> int:
                                                "seed": a.seed,
                                                "synth": [str(d) for d in a.synth or ()],
                                                "real": str(a.real), "columns": results,
-                                               "crease_profiles": bands},
+                                               "crease_profiles": bands,
+                                               "plane_references": refs},
                                               indent=1).encode())
     if a.figure is not None:
         _figure(results, a.figure)

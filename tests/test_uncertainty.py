@@ -893,6 +893,30 @@ def test_real_frame_held_out(shared_data):
     assert abs(p.mean() - o.mean()) <= 0.25 * o.mean(), (p.mean(), o.mean())
 
 
+def test_calibration_bench_reference_agreement_counts_each_case(load_benchmark):
+    """``ReferenceAgreement`` (``--planes``): six pixels, one per case, the angles chosen on
+    each side of ``WRONG_DEG`` (30) and ``SAME_DEG`` (10): a reference over 30 deg off with the
+    estimate on it (off the same way), one with the estimate off both, the estimate alone off,
+    all right, a pixel outside both parts and one with a NaN; interiors and rims apart."""
+    bench = load_benchmark("uncertainty_calibration")
+    #                  same  both  est   right outside nan
+    err_exact = np.array([40.0, 50.0, 35.0, 2.0, 90.0, 1.0])
+    err_ref = np.array([5.0, 45.0, 33.0, 2.0, 90.0, np.nan])
+    ref_exact = np.array([41.0, 31.0, 3.0, 0.5, 90.0, 0.0])
+    interior = np.array([True, False, True, True, False, True])
+    rim = np.array([False, True, False, False, False, False])
+    a = bench.ReferenceAgreement()
+    a.add(err_exact, err_ref, ref_exact, (interior, rim))
+    a.add(err_exact, err_ref, ref_exact, (interior, rim))  # counts add up
+    rows = a.rows()
+    assert rows["interior"] == {"pixels": 6, "reference_off": 2 / 6, "estimate_off_exact": 4 / 6,
+                                "estimate_off_reference": 2 / 6, "off_the_same_way": 2 / 6}
+    assert rows["rim"] == {"pixels": 2, "reference_off": 1.0, "estimate_off_exact": 1.0,
+                           "estimate_off_reference": 1.0, "off_the_same_way": 0.0}
+    empty = bench.ReferenceAgreement().rows()["rim"]
+    assert empty["pixels"] == 0 and math.isnan(empty["off_the_same_way"])
+
+
 def test_calibration_bench_splits_synthetic_on_and_off_planes(tmp_path, load_benchmark):
     """``benchmarks/uncertainty_calibration.py --planes``: each noisy synthetic column is
     split into the pixels of the plane reference found on its noisy depth and the rest, so the
@@ -907,7 +931,9 @@ def test_calibration_bench_splits_synthetic_on_and_off_planes(tmp_path, load_ben
     generate(tmp_path, indoor=1, outdoor=0, views=1, seed=3, K=Intrinsics(91.375, 91.375, 63.5, 52.5),
              size=(106, 128), progress=False, noise=("kinect_v1",))
     bench = load_benchmark("uncertainty_calibration")
-    cols = {k: c.summary() for k, c in bench.synth_columns(tmp_path, "3f2n+", planes=True).items()}
+    agreement: dict = {}
+    cols = {k: c.summary() for k, c in bench.synth_columns(tmp_path, "3f2n+", planes=True,
+                                                           agreement=agreement).items()}
     assert set(cols) == {"synth/clean", "synth/kinect_v1", "synth-planes/kinect_v1",
                          "synth-off/kinect_v1", "synth-asreal/kinect_v1"}
     on, off = cols["synth-planes/kinect_v1"]["pixels"], cols["synth-off/kinect_v1"]["pixels"]
@@ -936,6 +962,22 @@ def test_calibration_bench_splits_synthetic_on_and_off_planes(tmp_path, load_ben
     assert real_like["mean_predicted"] == cols["synth-planes/kinect_v1"]["mean_predicted"]
     exact = cols["synth-planes/kinect_v1"]["mean_observed"]
     assert abs(real_like["mean_observed"] - exact) > 1e-3 * exact  # not the exact normals
+    # the reference against the exact normals, per part, counted as recomputed here
+    rows = agreement["synth/kinect_v1"].rows()
+    assert set(agreement) == {"synth/kinect_v1"} and list(rows) == ["interior", "rim"]
+    e_exact = dn.angular_error(n, f.normals)
+    r_exact = dn.angular_error(g.astype(np.float32), f.normals)
+    ok = np.isfinite(e_exact) & np.isfinite(err) & np.isfinite(r_exact)
+    for part, m in (("interior", ref.interior), ("rim", ref.rim)):
+        m = m & ok
+        r = rows[part]
+        off = m & (r_exact > bench.WRONG_DEG)
+        assert r["pixels"] == m.sum() > 0
+        assert r["reference_off"] == off.sum() / m.sum()
+        assert r["estimate_off_exact"] == (m & (e_exact > bench.WRONG_DEG)).sum() / m.sum()
+        assert r["estimate_off_reference"] == (m & (err > bench.WRONG_DEG)).sum() / m.sum()
+        assert r["off_the_same_way"] == (off & (err <= bench.SAME_DEG)).sum() / m.sum()
+    assert rows["interior"]["pixels"] + rows["rim"]["pixels"] == on
 
 
 def test_calibration_bench_geometry_labels_a_crease_and_a_jump(load_benchmark):
