@@ -706,7 +706,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--figure", type=Path, default=None)
     ap.add_argument("--speed", action="store_true", help="time with and without the map instead")
     ap.add_argument("--planes", action="store_true",
-                    help="also score the synthetic columns on and off their plane reference")
+                    help="also score the synthetic columns on and off their plane reference, and on it "
+                         "against the reference's normals as the real frames are scored")
     ap.add_argument("--by-crease", action="store_true",
                     help="also score each synthetic column's pixels by a crease, by a jump and "
                          "the rest (the exact geometry of the view)")
