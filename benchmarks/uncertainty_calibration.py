@@ -508,7 +508,7 @@ def synth_columns(root: Path | list[Path], method: str, planes: bool = False, se
             on = ref.interior | ref.rim
             cols.setdefault(f"synth-planes/{variant}", Column()).add(u, err, valid & on)
             cols.setdefault(f"synth-off/{variant}", Column()).add(u, err, valid & ~on)
-            g = reference_normals(ref).astype(np.float32)
+            g = ref.normal_map().astype(np.float32)
             err_ref = dn.angular_error(n, g)
             cols.setdefault(f"synth-asreal/{variant}", Column()).add(u, err_ref, valid & on,
                                                                      name=name)
@@ -531,16 +531,6 @@ def synth_columns(root: Path | list[Path], method: str, planes: bool = False, se
     return cols
 
 
-def reference_normals(ref) -> np.ndarray:
-    """The normal of each pixel's plane in a plane reference (``plane_reference``), NaN where
-    it labels none (float64 (H, W, 3))."""
-    lab = ref.labels
-    g = np.full((*lab.shape, 3), np.nan, dtype=np.float64)
-    has = lab >= 0
-    g[has] = ref.normals[lab[has]]
-    return g
-
-
 def real_columns(root: Path, method: str, seed: int, min_fraction: float | None = None,
                  creases: bool = False, profiles: dict[str, BandProfile] | None = None
                  ) -> dict[str, Column]:
@@ -555,7 +545,7 @@ def real_columns(root: Path, method: str, seed: int, min_fraction: float | None 
         ref = plane_reference(f.depth, f.K, seed=seed, threshold=sensor_threshold(f.meta),
                               **more)
         n, u = dn.estimate_normals(f.depth, f.K, method=method, return_uncertainty=True)
-        g = reference_normals(ref)
+        g = ref.normal_map()
         err = dn.angular_error(n, g.astype(np.float32))
         mask = ref.interior | ref.rim
         group = str(f.group).split("/")[0]

@@ -882,10 +882,7 @@ def test_real_frame_held_out(shared_data):
     f = next(iter(dn.datasets.open(shared_data / "real-sensors" / "tum_fr2_kinect1_slambook")))
     ref = plane_reference(f.depth, f.K, seed=0, threshold=sensor_threshold(f.meta))
     n, u = dn.estimate_normals(f.depth, f.K, return_uncertainty=True)
-    g = np.full(n.shape, np.nan, dtype=np.float32)
-    has = ref.labels >= 0
-    g[has] = ref.normals[ref.labels[has]]
-    err = dn.angular_error(n, g)
+    err = dn.angular_error(n, ref.normal_map().astype(np.float32))
     m = (ref.interior | ref.rim) & np.isfinite(err) & np.isfinite(u)
     p, o = u[m].astype(np.float64), err[m].astype(np.float64)
     rank = np.corrcoef(np.argsort(np.argsort(p)), np.argsort(np.argsort(o)))[0, 1]
@@ -923,7 +920,7 @@ def test_calibration_bench_splits_synthetic_on_and_off_planes(tmp_path, load_ben
     two together are exactly the column (no pixel lost or counted twice), the clean column is
     not split, and both parts of a room scene have pixels; ``synth-asreal`` holds the plane
     pixels scored as the real frames are, against the reference's own normals (its mean
-    observed error that of the estimate against ``reference_normals``, not the exact
+    observed error that of the estimate against ``PlaneReference.normal_map``, not the exact
     normals')."""
     from depthnormals.camera import Intrinsics
     from depthnormals.synth import generate
@@ -950,10 +947,11 @@ def test_calibration_bench_splits_synthetic_on_and_off_planes(tmp_path, load_ben
     f = next(f for f in read_synthetic(tmp_path) if f.group.endswith("kinect_v1"))
     ref = plane_reference(f.depth, f.K, seed=0, threshold=sensor_threshold({}))
     n, u = dn.estimate_normals(f.depth, f.K, return_uncertainty=True)
-    g = bench.reference_normals(ref)
+    g = ref.normal_map()
     assert g.shape == n.shape and np.isnan(g[ref.labels < 0]).all()
     assert np.array_equal(g[ref.labels == 0], np.broadcast_to(ref.normals[0], g[ref.labels == 0].shape))
-    err = dn.angular_error(n, g.astype(np.float32))
+    g = g.astype(np.float32)
+    err = dn.angular_error(n, g)
     keep = (ref.interior | ref.rim) & np.isfinite(u) & np.isfinite(err)
     real_like = cols["synth-asreal/kinect_v1"]
     assert real_like["pixels"] == keep.sum() == on
@@ -966,7 +964,7 @@ def test_calibration_bench_splits_synthetic_on_and_off_planes(tmp_path, load_ben
     rows = agreement["synth/kinect_v1"].rows()
     assert set(agreement) == {"synth/kinect_v1"} and list(rows) == ["interior", "rim"]
     e_exact = dn.angular_error(n, f.normals)
-    r_exact = dn.angular_error(g.astype(np.float32), f.normals)
+    r_exact = dn.angular_error(g, f.normals)
     ok = np.isfinite(e_exact) & np.isfinite(err) & np.isfinite(r_exact)
     for part, m in (("interior", ref.interior), ("rim", ref.rim)):
         m = m & ok
