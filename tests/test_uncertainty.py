@@ -55,6 +55,29 @@ def test_nan_pattern_matches_normals_with_holes(method):
 
 
 @pytest.mark.parametrize("method", UNCERTAINTY_METHODS)
+@pytest.mark.parametrize("shape", [(1, 48), (48, 1), (30, 40), (40, 30)])
+def test_small_images_get_a_map(method, shape):
+    """Images one row or column across, or smaller than the plain maps' pair span
+    (PLAIN_SPAN, 41 px), on noisy depth. Before session 28 the plain maps raised numpy's
+    broadcast error on the 30 x 40 and 40 x 30 ones (a pair slice whose stop fell below 0
+    wrapped to the image's end) and the one-row image raised a slice error: the plane-fit
+    kernel took its one-row placeholders for "no large window" and "no spreads" for arrays
+    of the image's one row (and read the first past its end)."""
+    rng = np.random.default_rng(0)
+    K = np.array([[300.0, 0.0, 20.0], [0.0, 300.0, 15.0], [0.0, 0.0, 1.0]])
+    d = 1.0 + 0.001 * rng.random(shape)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", dn.NoValidNormalWarning)
+        n, u = dn.estimate_normals(d, K, method=method, return_uncertainty=True)
+    assert u.dtype == np.float32 and u.shape == shape
+    np.testing.assert_array_equal(np.isnan(u), np.isnan(n[..., 0]))
+    fin = u[np.isfinite(u)]
+    assert np.all((fin >= 0.0) & (fin <= 90.0))
+    if min(shape) > 1:
+        assert fin.size > shape[0] * shape[1] // 2
+
+
+@pytest.mark.parametrize("method", UNCERTAINTY_METHODS)
 def test_map_never_exceeds_the_error_of_no_information(method):
     """A camera-facing normal that carries no information errs 57.3-90 deg on average
     (MAX_ERROR): no map reads more. Before the ceiling (00b3423), on these inputs, the 3f2n+

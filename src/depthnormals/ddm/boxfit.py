@@ -531,7 +531,8 @@ def choose_windows(z: np.ndarray, fit_n: np.ndarray, score: np.ndarray, fx: floa
     ``self_weight`` first (it wins ties). Writes every pixel of ``out`` (H, W, 3) float32:
     NaN at invalid depth and where no window has a fit.
     """
-    big_n, big_s = big if big is not None else (fit_n[:, :1], score[:1])
+    # none: no rows (a single row would read as present on an image of one row)
+    big_n, big_s = big if big is not None else (fit_n[:, :0], score[:0])
     bg = gate if big_gate is None else big_gate
     run_rows(_choose_rows, z.shape[0], z, fit_n, score, big_n, big_s, int(shift), float(gate),
              float(bg), float(self_weight), float(fx), float(fy), float(cx), float(cy), out, min_rows=16)

@@ -309,8 +309,8 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
     residual ratio is taken at least ``floor``, with ``tilt`` the error is projected as the
     module doc says; ``big = (score, gate, ratio)``: where the large window's residual (H, W)
     is within ``gate`` times ``var`` the error is ``ratio e0`` and that residual counts (a
-    (1, 1) score: none); ``cam = (fx, fy, cx, cy)``; ``box = (sub, sh, out_map, near_d)``.
-    With ``out_map`` (H, W) (not (1, 1)) or ``sp_out`` (2, H, W) (not (1, 1, 1)) two spreads
+    (0, 0) score: none); ``cam = (fx, fy, cx, cy)``; ``box = (sub, sh, out_map, near_d)``.
+    With ``out_map`` (H, W) (not (0, 0)) or ``sp_out`` (2, H, W) (not (2, 0, 0)) two spreads
     are computed beside the error: the mean angle (degrees) of the normals ``max(1,
     near_d)`` pixels to the right, left, below and above, and that of the normals ``far_d``
     to the right and below (the ring of planar rows then ``far_d`` ahead and ``near_d``
@@ -1173,11 +1173,13 @@ def _fit_error(z, normals, score, shift, tiles, depth, big, cam, far_d: int = 0,
     """The plane-fit error map of :func:`_fit_error_rows` (no spreads written out: the box-fit
     branch's go into its map through ``box``)."""
     out = np.empty(z.shape, dtype=np.float32)
+    # "none" is an array of no rows: one of a single row would read as present on an image of
+    # one row (the kernel tells them by their rows)
     if big is None:
-        big = (np.full((1, 1), np.inf, dtype=np.float32), 0.0, 1.0)
-    sp_out = np.empty((1, 1, 1), dtype=np.float32)
+        big = (np.full((0, 0), np.inf, dtype=np.float32), 0.0, 1.0)
+    sp_out = np.empty((2, 0, 0), dtype=np.float32)
     if box is None:
-        box = (np.empty((2, 1, 1), dtype=np.float32), 0, np.empty((1, 1), dtype=np.float32), 0)
+        box = (np.empty((2, 0, 0), dtype=np.float32), 0, np.empty((0, 0), dtype=np.float32), 0)
     normals = np.ascontiguousarray(normals, dtype=np.float32)
     run_rows(_fit_error_rows, z.shape[0], z, normals, score, int(shift), tiles, depth, big, cam,
              out, sp_out, int(far_d), box, min_rows=16)
@@ -1447,6 +1449,8 @@ def _pair_excess(normals, m, score) -> float:
     g, d = PAIR_GRID, PLAIN_SPAN
     ratios = []
     for dv, du in ((0, d), (d, 0)):
+        if dv >= h or du >= w:  # no pair that far apart (a stop below 0 would wrap)
+            continue
         a = (slice(0, h - dv, g), slice(0, w - du, g))
         b = (slice(dv, h, g), slice(du, w, g))
         pair = inside[a] & inside[b]
@@ -1455,7 +1459,7 @@ def _pair_excess(normals, m, score) -> float:
         scale = np.hypot(m[a][pair], m[b][pair]).astype(np.float64)
         good = scale > 0.0
         ratios.append(np.degrees(np.arccos(cos[good])) / scale[good])
-    r = np.concatenate(ratios)
+    r = np.concatenate(ratios) if ratios else np.empty(0)
     r = r[np.isfinite(r)]
     return max(1.0, float(np.median(r)) / RAYLEIGH_MEDIAN) if r.size >= MIN_PAIRS else 1.0
 
