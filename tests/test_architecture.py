@@ -15,10 +15,11 @@ PKG = "depthnormals"
 #: Lowest first. A module belongs to the layer of its longest matching prefix; it may import
 #: modules of its own layer or of a lower one, never of a higher one.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    # base: validation, threads, camera, file formats, analytic scenes, rendering, metrics
+    # base: validation, threads, camera, file formats, analytic scenes, rendering, metrics,
+    # digests of code and data
     ("depthnormals._validate", "depthnormals._parallel", "depthnormals.camera", "depthnormals._png",
      "depthnormals.io", "depthnormals.metrics", "depthnormals.analytic", "depthnormals.render",
-     "depthnormals._progress"),
+     "depthnormals._progress", "depthnormals._fingerprint"),
     ("depthnormals.kernels",),  # shared compiled row kernels and their constants
     ("depthnormals.estimators",),  # one public function per estimator
     ("depthnormals.ddm",),  # the discontinuity discrimination module, fused 3F2N+

@@ -1,8 +1,10 @@
 """Every output knows how it was made: never "done before" for different work.
 
 `depthnormals estimate` writes a manifest per output folder and refuses a resumed run with
-other settings (saying how to force it); `evaluate` keys each stored part by its settings
-(a rerun recomputes what differs); `synth` refuses a folder made with other settings.
+other settings or another build of the library (saying how to force it), and recomputes an
+output older than its depth file; `evaluate` keys each stored part by its settings, the
+frame's data and the library's code (a rerun recomputes what differs); `synth` refuses a
+folder made with other settings.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import numpy as np
 import pytest
 
 from depthnormals import jobs
+from depthnormals._fingerprint import array_digest, code_fingerprint
 from depthnormals._png import encode_png
 from depthnormals.analytic import make_scene
 from depthnormals.cli import main
@@ -80,7 +83,77 @@ def test_manifest_records_how_the_outputs_were_made(folder):
     assert data["settings"] == {
         "method": "3f2n", "options": {"kernel": "sobel"}, "depth_scale": 0.001, "invalid": [],
         "max_depth": None, "intrinsics": {"fx": 50.0, "fy": 50.0, "cx": 23.5, "cy": 17.5},
-        "format": "npy", "vis": None}
+        "format": "npy", "vis": None, "library_code": code_fingerprint()}
+
+
+def test_outputs_of_another_build_of_the_library_are_refused(folder, capsys, monkeypatch):
+    """An edited or upgraded library (the same version string between development builds)
+    does not take the outputs of the old one as done."""
+    assert _run(folder) == 0
+    capsys.readouterr()
+    monkeypatch.setattr(jobs, "code_fingerprint", lambda: "0" * 24)
+    assert _run(folder) == 1
+    err = capsys.readouterr().err
+    assert "library_code" in err and "--no-resume" in err
+    assert _run(folder, "--no-resume") == 0
+    assert "(3 computed, 0 done before)" in capsys.readouterr().out
+
+
+def test_an_output_older_than_its_depth_file_is_recomputed(folder, capsys):
+    import os
+
+    assert _run(folder) == 0
+    capsys.readouterr()
+    src = folder / "in" / "1.png"
+    out = folder / "out" / "1.npy"
+    t = src.stat().st_mtime_ns - 10**9
+    os.utime(out, ns=(t, t))  # the depth rewritten after its output was
+    assert _run(folder) == 0
+    assert "(1 computed, 2 done before)" in capsys.readouterr().out
+    assert out.stat().st_mtime_ns > src.stat().st_mtime_ns
+    assert _run(folder) == 0
+    assert "(0 computed, 3 done before)" in capsys.readouterr().out
+
+
+def test_evaluate_scores_a_rewritten_frame_and_an_edited_library_again(tmp_path, monkeypatch):
+    """A frame rewritten under the same name, or the same frame under another build of the
+    library, is scored again: before session 28 the stored part of the first was returned
+    (a clean plane's 1e-4 deg for its noisy rewrite)."""
+    from depthnormals.analytic import tilted_plane
+    from depthnormals.datasets import Frame
+    from depthnormals.evaluate import _run as run_mod
+    from depthnormals.evaluate import run_evaluation
+
+    r = tilted_plane((0.0, -0.6, -0.8), 2.0).render(shape=(30, 40))
+
+    def frames(noise):
+        d = r.depth * (1 + noise * np.random.default_rng(0).standard_normal(r.depth.shape))
+        return [Frame(d.astype(np.float32), r.normals, r.K, np.isfinite(r.depth), "f0", "g")]
+
+    out = tmp_path / "ev"
+    a = run_evaluation(frames(0.0), "3f2n", out, dataset_name="x", figures=0)
+    b = run_evaluation(frames(0.01), "3f2n", out, dataset_name="x", figures=0)
+    assert (b.computed, b.reused) == (1, 0)
+    assert a.rows[0]["mean_deg"] < 0.01 < 1.0 < b.rows[0]["mean_deg"]
+    c = run_evaluation(frames(0.01), "3f2n", out, dataset_name="x", figures=0)
+    assert (c.computed, c.reused) == (0, 1) and c.rows[0]["mean_deg"] == b.rows[0]["mean_deg"]
+    monkeypatch.setattr(run_mod, "code_fingerprint", lambda: "0" * 24)
+    d = run_evaluation(frames(0.01), "3f2n", out, dataset_name="x", figures=0)
+    assert (d.computed, d.reused) == (1, 0)
+
+
+def test_array_digest_tells_every_difference():
+    a = np.arange(12, dtype=np.float32).reshape(3, 4)
+    base = array_digest(a, None)
+    assert array_digest(a.copy(), None) == base
+    assert array_digest(np.asfortranarray(a), None) == base  # the values, not the layout
+    b = a.copy()
+    b[2, 3] = np.nextafter(b[2, 3], np.float32(100))
+    for other in (array_digest(b, None), array_digest(a.reshape(4, 3), None),
+                  array_digest(a.astype(np.float64), None), array_digest(a, a), array_digest(a),
+                  array_digest(None, a)):
+        assert other != base
+    assert len(code_fingerprint()) == 24 and code_fingerprint() == code_fingerprint()
 
 
 def test_outputs_without_a_manifest_are_recomputed(folder, capsys):

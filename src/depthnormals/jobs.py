@@ -17,10 +17,12 @@ and counted (:attr:`RunSummary.not_depth`); a file named on its own is always re
 
 The manifest: every output folder holds :data:`MANIFEST` (``depthnormals-manifest.json``),
 what its normals were made with (:func:`manifest_settings`: method, options, depth scale,
-invalid codes, maximum depth, intrinsics, format, colouring) and the library version. A
-rerun with other settings is refused before any work (:class:`SettingsMismatch`, which says
+invalid codes, maximum depth, intrinsics, format, colouring, the digest of the library's
+code) and the library version. A rerun with other settings or another build of the library is
+refused before any work (:class:`SettingsMismatch`, which says
 what differs and how to recompute: ``resume=False`` / ``--no-resume``); outputs found in a
-folder without a manifest are recomputed, never taken as done. A run that fails before it
+folder without a manifest are recomputed, never taken as done, and so is an output older
+than its depth file. A run that fails before it
 writes any frame leaves no manifest, and no output folder it created itself.
 """
 
@@ -38,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from ._fingerprint import code_fingerprint
 from .camera import Intrinsics, as_intrinsics
 from .io import DEPTH_SUFFIXES, VIS_CONVENTIONS, not_depth_reason
 
@@ -345,7 +348,10 @@ def manifest_settings(settings: EstimateSettings, K: Any, fmt: str) -> dict[str,
     """The settings a manifest records and a resumed run must match: method, options, depth
     scale, invalid codes, maximum depth, intrinsics (None: each dataset frame's own),
     output format and, for ``vis.png``, the colouring; ``"uncertainty": True`` when the
-    expected-error maps are written (absent otherwise, so older manifests still match)."""
+    expected-error maps are written (absent otherwise); and ``library_code``, the digest of the
+    library's modules (:func:`depthnormals._fingerprint.code_fingerprint`): outputs of an
+    edited or upgraded library are not taken as done (its version string does not change
+    between development builds)."""
     cam = None if K is None else as_intrinsics(K)
     extra = {"uncertainty": True} if settings.uncertainty else {}
     return {
@@ -358,7 +364,19 @@ def manifest_settings(settings: EstimateSettings, K: Any, fmt: str) -> dict[str,
         "format": fmt,
         "vis": settings.vis if fmt == "vis.png" else None,
         **extra,
+        "library_code": code_fingerprint(),
     }
+
+
+def _changed_since(job: EstimateJob) -> bool:
+    """Whether the job's depth file was written after its output (make's rule: the output is
+    stale and is computed again); False for a frame a dataset reader carries."""
+    if job.source is None:
+        return False
+    try:
+        return Path(job.source).stat().st_mtime_ns > job.output.stat().st_mtime_ns
+    except OSError:
+        return True
 
 
 def _read_manifest(path: Path) -> dict[str, Any] | None:
@@ -510,7 +528,7 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
             counts["planned"] += 1
             if not trusted and not fresh:
                 planned.add(job.output)
-            if resume and trusted and job.output.is_file():
+            if resume and trusted and job.output.is_file() and not _changed_since(job):
                 counts["skipped"] += 1
                 bar.update(f"{job.label} (done before)")
                 continue

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from .._fingerprint import array_digest, code_fingerprint
 from .._progress import Progress
 from .._validate import NoValidNormalWarning
 from ..datasets import Frame
@@ -276,9 +277,14 @@ def _estimate(spec: MethodSpec, frame: Frame, warmed: set[str]) -> tuple[np.ndar
 
 def _part_key(store: PartStore, dataset_id: str, frame: Frame, spec: MethodSpec,
               protocol: Protocol) -> str:
-    """The store key of one (frame, method) part (the serial and the Dask runs share it)."""
+    """The store key of one (frame, method) part (the serial and the Dask runs share it): the
+    frame's name and its data (depth, ground truth, mask, camera: a frame rewritten under the
+    same name is scored again), the method, the protocol and the library's code (an edited
+    library scores again; its version string does not change between development builds)."""
     return store.key(dataset=dataset_id, group=frame.group, frame=frame.name,
-                     method=spec.method, options=spec.options, protocol=protocol.as_dict())
+                     data=array_digest(frame.depth, frame.normals, frame.mask, frame.K),
+                     code=code_fingerprint(), method=spec.method, options=spec.options,
+                     protocol=protocol.as_dict())
 
 
 def _near_mask(frame: Frame, protocol: Protocol) -> np.ndarray:

@@ -83,9 +83,10 @@ def read_results_csv(path: str | Path) -> list[dict[str, Any]]:
 class PartStore:
     """One small file per finished (frame, method) under ``<out>/parts/``.
 
-    A part is keyed by a hash of everything that determines its numbers (dataset, frame,
-    method and options, protocol); it is written atomically, so after an interruption every
-    part present is complete, and a resumed run reuses exactly those.
+    A part is keyed by a hash of everything that determines its numbers (dataset, frame and
+    its data, method and options, protocol, the library's code); it is written atomically, so
+    after an interruption every part present is complete, and a resumed run reuses exactly
+    those.
     """
 
     def __init__(self, root: Path) -> None:
