@@ -4,7 +4,7 @@
 other settings or another build of the library (saying how to force it), and recomputes an
 output older than its depth file; `evaluate` keys each stored part by its settings, the
 frame's data and the library's code (a rerun recomputes what differs); `synth` refuses a
-folder made with other settings.
+folder made with other settings or resumed by another build of the library.
 """
 
 from __future__ import annotations
@@ -202,6 +202,27 @@ def test_synth_rerun_with_other_settings_is_refused(tmp_path, capsys):
     assert main([*base, "--seed", "1"]) == 1
     err = capsys.readouterr().err
     assert "other settings" in err and "another output folder" in err
+
+
+def test_synth_resume_by_another_build_of_the_library_is_refused(tmp_path, capsys, monkeypatch):
+    """Its views would mix with the other build's; a folder of before session 28 (no digest
+    recorded) still resumes."""
+    from depthnormals.synth import writer
+
+    base = ["synth", str(tmp_path / "s"), "--indoor", "1", "--outdoor", "0", "--views", "1", "--width",
+            "48", "--height", "36", "--noise", "none", "--scenes", "procedural", "--no-progress"]
+    assert main(base) == 0
+    assert main(base) == 0  # the same build: resumes (nothing left to do)
+    capsys.readouterr()
+    monkeypatch.setattr(writer, "code_fingerprint", lambda: "0" * 24)
+    assert main(base) == 1
+    err = capsys.readouterr().err
+    assert "another build" in err and "another output folder" in err
+    sidecar = tmp_path / "s" / "dataset.json"
+    meta = json.loads(sidecar.read_text())
+    del meta["library_code"]
+    sidecar.write_text(json.dumps(meta))
+    assert main(base) == 0
 
 
 def test_forced_run_over_fewer_frames_does_not_vouch_for_the_rest(folder, capsys):
