@@ -18,12 +18,12 @@ and counted (:attr:`RunSummary.not_depth`); a file named on its own is always re
 The manifest: every output folder holds :data:`MANIFEST` (``depthnormals-manifest.json``),
 what its normals were made with (:func:`manifest_settings`: method, options, depth scale,
 invalid codes, maximum depth, intrinsics, format, colouring, the digest of the library's
-code) and the library version. A rerun with other settings or another build of the library is
-refused before any work (:class:`SettingsMismatch`, which says
-what differs and how to recompute: ``resume=False`` / ``--no-resume``); outputs found in a
-folder without a manifest are recomputed, never taken as done, and so is an output older
-than its depth file. A run that fails before it
-writes any frame leaves no manifest, and no output folder it created itself.
+code) and the library version. A rerun with other settings or another build of the library
+is refused before any work (:class:`SettingsMismatch`, which says what differs and how to
+recompute: ``resume=False`` / ``--no-resume``); outputs found in a folder without a manifest
+are recomputed, never taken as done, and so is an output older than its depth file. A run
+that fails before it writes any frame leaves no manifest, and no output folder it created
+itself.
 """
 
 from __future__ import annotations
