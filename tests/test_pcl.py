@@ -310,6 +310,8 @@ def test_conventions(method):
     ({"mode": "covariance"}, ValueError, "mode"),
     ({"border_policy": "BORDER_POLICY_MIRROR"}, ValueError, "border_policy"),
     ({"normal_smoothing_size": 1.5}, ValueError, "normal_smoothing_size"),
+    # 2 leaves every normal NaN unless the window grows with depth
+    ({"normal_smoothing_size": 2.0}, ValueError, "depth_dependent_smoothing is True"),
     ({"normal_smoothing_size": "10"}, TypeError, "normal_smoothing_size"),
     ({"max_depth_change_factor": -0.1}, ValueError, "max_depth_change_factor"),
     ({"max_depth_change_factor": np.nan}, ValueError, "max_depth_change_factor"),

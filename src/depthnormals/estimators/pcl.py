@@ -485,7 +485,8 @@ def pcl_integral_image(depth: Any, K: Any, *, mode: str = "average-3d-gradient",
         depth jump (PCL's ``setMaxDepthChangeFactor``; 0.02 in its tutorial and constructor).
     normal_smoothing_size : float, default 10.0
         Largest window size in pixels (PCL's ``setNormalSmoothingSize``; 10 in its tutorial
-        and constructor); must be >= 2.
+        and constructor); must be >= 2, and over 2 unless ``depth_dependent_smoothing``
+        (a pixel abstains unless its window exceeds 2: at 2 every normal would be NaN).
     depth_dependent_smoothing : bool, default False
         Grow the window with depth: ``normal_smoothing_size + z / 10`` pixels, z in metres.
     border_policy : {"mirror", "ignore"}, default "mirror"
@@ -570,6 +571,10 @@ def pcl_integral_image(depth: Any, K: Any, *, mode: str = "average-3d-gradient",
     if not isinstance(depth_dependent_smoothing, (bool, np.bool_)):
         raise TypeError(f"depth_dependent_smoothing must be True or False; got "
                         f"{depth_dependent_smoothing!r}")
+    if size <= 2.0 and not depth_dependent_smoothing:
+        raise ValueError(f"normal_smoothing_size must exceed 2 unless depth_dependent_smoothing "
+                         f"is True: a pixel abstains unless min(distance, normal_smoothing_size) "
+                         f"exceeds 2, so {size:g} leaves every normal NaN (PCL's default is 10)")
     z, cam = prepare(depth, K, depth_scale)
     h, w = z.shape
     code = MODES.index(mode)
