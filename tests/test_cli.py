@@ -54,6 +54,20 @@ def test_estimate_writes_the_library_result(inputs, method, opts, capsys):
     assert str(out) in capsys.readouterr().out
 
 
+def test_estimate_takes_the_camera_inline(inputs):
+    """``-K fx,fy,cx,cy`` gives what the same camera's file gives, in one file and many."""
+    folder, z, K = inputs
+    inline = ",".join(f"{x:g}" for x in K)
+    assert main(["estimate", str(folder / "depth.npy"), "-K", inline, "-o",
+                 str(folder / "a.npy"), "-q"]) == 0
+    np.testing.assert_array_equal(np.load(folder / "a.npy"), dn.estimate_normals(z, K))
+    (folder / "in").mkdir()
+    np.save(folder / "in" / "d.npy", z)
+    assert main(["estimate", str(folder / "in"), "-K", inline, "-o", str(folder / "many"),
+                 "-q"]) == 0
+    np.testing.assert_array_equal(np.load(folder / "many" / "d.npy"), np.load(folder / "a.npy"))
+
+
 def test_estimate_png_output(inputs):
     folder, z, K = inputs
     out = folder / "n.png"

@@ -231,6 +231,22 @@ def test_read_intrinsics_params_txt_is_one_based(tmp_path):
         read_intrinsics(tmp_path / "none.json")
 
 
+def test_intrinsics_inline(tmp_path, monkeypatch):
+    """``fx,fy,cx,cy`` where no file has that name is the camera itself; a file of that name
+    wins; anything else still says the file does not exist, and names the inline form."""
+    monkeypatch.chdir(tmp_path)
+    assert read_intrinsics("525,520,319.5,239.5") == dn.Intrinsics(525.0, 520.0, 319.5, 239.5)
+    assert read_intrinsics(" 525, 520 ,319.5,239.5") == dn.Intrinsics(525.0, 520.0, 319.5, 239.5)
+    with pytest.raises(ValueError, match="focal"):
+        read_intrinsics("-525,520,319.5,239.5")
+    for text in ("525,520,319.5", "525,520,319.5,239.5,1", "fx,fy,cx,cy", "cam.json"):
+        with pytest.raises(FileNotFoundError, match="inline as fx,fy,cx,cy"):
+            read_intrinsics(text)
+    (tmp_path / "1,2,3,4").write_text("not a camera")  # a file of that name is read as one
+    with pytest.raises(ValueError, match="1,2,3,4"):
+        read_intrinsics("1,2,3,4")
+
+
 # --- normals ------------------------------------------------------------------------------
 
 def _normals():

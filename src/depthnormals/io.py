@@ -395,6 +395,8 @@ def read_camera_file(path: str | Path) -> CameraFile:
     - Text (``.txt``): 9 numbers are a 3x3 ``K``, 12 a 3x4 ``P`` (row-major), 4 or 5 the 3F2N
       dataset's ``params.txt`` (``fx fy cx cy [N]`` on MATLAB's 1-based grid: 1 is
       subtracted from ``cx, cy``).
+    - No file of that name: four comma-separated numbers ``fx,fy,cx,cy`` are the camera
+      itself (pixels, 0-based), as the command line's ``-K 525,525,319.5,239.5``.
 
     This is the one reader of camera files; dataset readers with such a file (e.g. a folder
     of depth images beside an ``intrinsics.json``) can call it too.
@@ -413,7 +415,11 @@ def read_camera_file(path: str | Path) -> CameraFile:
     """
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"intrinsics file {path} does not exist")
+        inline = _inline_camera(str(path))
+        if inline is not None:
+            return CameraFile(inline, source=path)
+        raise FileNotFoundError(f"intrinsics file {path} does not exist (the camera can also "
+                                "be given inline as fx,fy,cx,cy, e.g. 525,525,319.5,239.5)")
     suffix = path.suffix.lower()
     try:
         text = path.read_text()
@@ -520,6 +526,19 @@ def _mapping_camera(data: dict, path: Path) -> CameraFile:
 
 
 _EXTRAS = ("depth_scale", "invalid", "invalid_value", "max_depth", "encoding", "raw_format")
+
+
+def _inline_camera(text: str) -> Intrinsics | None:
+    """``fx,fy,cx,cy`` written out (four comma-separated numbers), or None if ``text`` is not
+    that; the numbers are checked as any camera's (ValueError)."""
+    parts = text.split(",")
+    if len(parts) != 4:
+        return None
+    try:
+        fx, fy, cx, cy = (float(p) for p in parts)
+    except ValueError:
+        return None
+    return as_intrinsics((fx, fy, cx, cy))
 
 
 def read_intrinsics(path: str | Path) -> Intrinsics:

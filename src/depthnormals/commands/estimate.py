@@ -35,8 +35,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--intrinsics", "-K", type=Path, default=None,
                         help="camera file: .json/.yaml (fx, fy, cx, cy, K or P; ROS camera_info; Open3D "
                              "intrinsic_matrix; optional depth_scale, invalid, max_depth) or .txt (3x3 K, "
-                             "3x4 P, or 3F2N params.txt) (required for depth files; dataset folders "
-                             "bring their own)")
+                             "3x4 P, or 3F2N params.txt), or the camera inline as fx,fy,cx,cy "
+                             "(e.g. -K 525,525,319.5,239.5) (required for depth files; dataset "
+                             "folders bring their own)")
     parser.add_argument("-o", "--output", type=Path, required=True,
                         help="output: .npy (float32), .png (16-bit), .vis.png (8-bit picture) or .ply "
                              "(point cloud with normals); "
