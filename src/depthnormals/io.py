@@ -357,7 +357,7 @@ class CameraFile:
     max_depth : float or None
         Depth beyond this many metres is invalid (key ``max_depth``).
     source : Path
-        The file read.
+        The file read (the text itself, as a Path, for a camera given inline).
     encoding : str or None
         How raw values become depth (key ``encoding``): ``"linear"`` (``value * depth_scale``)
         or a name a dataset reader knows (``"nyu_raw_disparity"``, ...); None when the file
