@@ -8,7 +8,7 @@ part done and writes ``results.csv``, the summaries and the figures as a serial 
 (``ms`` measured on the workers).
 
 :func:`_frame_parts` is the part-computing half of ``_run._evaluate_frame`` (no tally, no
-figures), built from the same pieces: ``_part_key``, ``_estimate``, ``_near_mask``, ``_row``.
+figures), built from the same pieces: ``_part_keys``, ``_estimate``, ``_near_mask``, ``_row``.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from typing import Any
 from ..datasets import Frame
 from ._methods import MethodSpec, resolve_methods
 from ._protocol import Protocol, score_frame
-from ._run import _estimate, _near_mask, _part_key, _row
+from ._run import _estimate, _near_mask, _part_keys, _row
 from ._store import PartStore
 
 __all__ = ["compute_parts"]
@@ -36,8 +36,7 @@ def _frame_parts(frame: Frame, *, specs: Sequence[MethodSpec], protocol: Protoco
     store = PartStore(Path(parts))
     near = None
     done = 0
-    for spec in specs:
-        key = _part_key(store, dataset_id, frame, spec, protocol)
+    for spec, key in zip(specs, _part_keys(store, dataset_id, frame, specs, protocol), strict=True):
         if resume and store.load(key) is not None:
             continue
         est, ms = _estimate(spec, frame, _warmed)
@@ -89,8 +88,8 @@ def compute_parts(dataset: str | Path, methods: str | Sequence[str], out_dir: st
 
     def todo():
         for frame in islice(datasets.open(path), frames):
-            if resume and all(store.load(_part_key(store, dataset_id, frame, s, protocol)) is not None
-                              for s in specs):
+            if resume and all(store.load(k) is not None
+                              for k in _part_keys(store, dataset_id, frame, specs, protocol)):
                 continue
             yield frame
 

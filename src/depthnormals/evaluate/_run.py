@@ -275,16 +275,17 @@ def _estimate(spec: MethodSpec, frame: Frame, warmed: set[str]) -> tuple[np.ndar
     return est, (time.perf_counter() - t0) * 1e3
 
 
-def _part_key(store: PartStore, dataset_id: str, frame: Frame, spec: MethodSpec,
-              protocol: Protocol) -> str:
-    """The store key of one (frame, method) part (the serial and the Dask runs share it): the
-    frame's name and its data (depth, ground truth, mask, camera: a frame rewritten under the
-    same name is scored again), the method, the protocol and the library's code (an edited
-    library scores again; its version string does not change between development builds)."""
-    return store.key(dataset=dataset_id, group=frame.group, frame=frame.name,
-                     data=array_digest(frame.depth, frame.normals, frame.mask, frame.K),
-                     code=code_fingerprint(), method=spec.method, options=spec.options,
-                     protocol=protocol.as_dict())
+def _part_keys(store: PartStore, dataset_id: str, frame: Frame, specs: Sequence[MethodSpec],
+               protocol: Protocol) -> list[str]:
+    """The store keys of a frame's (frame, method) parts, one per spec (the serial and the
+    Dask runs share them): the frame's name and its data (depth, ground truth, mask, camera: a
+    frame rewritten under the same name is scored again; digested once for all the methods),
+    the method, the protocol and the library's code (an edited library scores again; its
+    version string does not change between development builds)."""
+    data = array_digest(frame.depth, frame.normals, frame.mask, frame.K)
+    return [store.key(dataset=dataset_id, group=frame.group, frame=frame.name, data=data,
+                      code=code_fingerprint(), method=spec.method, options=spec.options,
+                      protocol=protocol.as_dict()) for spec in specs]
 
 
 def _near_mask(frame: Frame, protocol: Protocol) -> np.ndarray:
@@ -308,8 +309,8 @@ def _evaluate_frame(frame: Frame, plan: EvaluationPlan, store: PartStore, datase
     near = None
     fig_errors: dict[str, np.ndarray] = {}
     fig_estimate = None
-    for spec in plan.methods:
-        key = _part_key(store, dataset_id, frame, spec, protocol)
+    keys = _part_keys(store, dataset_id, frame, plan.methods, protocol)
+    for spec, key in zip(plan.methods, keys, strict=True):
         got = store.load(key) if resume else None
         if got is None or want_fig:
             est, ms = _estimate(spec, frame, tally.warmed)
