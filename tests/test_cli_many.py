@@ -63,14 +63,14 @@ def test_glob_and_files_with_options_and_png(tree, capsys):
     argv = ["estimate", str(root / "in" / "a" / "*.npy"), "-K", str(root / "k.json"), "-o", str(out),
             "-m", "3f2n", "--option", "kernel=sobel", "--format", "png", "-q"]
     assert main(argv) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["0.png", "1.png", jobs.MANIFEST]
+    assert sorted(p.name for p in out.iterdir()) == ["0.png", "1.png", jobs.INPUTS_LOG, jobs.MANIFEST]
     want = dn.estimate_normals(files["a/1.npy"], K, method="3f2n", kernel="sobel")
     np.testing.assert_allclose(dn.io.read_normals(out / "1.png"), want, atol=3e-5)
     # two plain files: named after themselves; same name twice is refused
     out2 = root / "out2"
     assert main(["estimate", str(root / "in" / "a" / "1.npy"), str(root / "in" / "b" / "0.npy"),
                  "-K", str(root / "k.json"), "-o", str(out2), "-q"]) == 0
-    assert sorted(p.name for p in out2.iterdir()) == ["0.npy", "1.npy", jobs.MANIFEST]
+    assert sorted(p.name for p in out2.iterdir()) == ["0.npy", "1.npy", jobs.INPUTS_LOG, jobs.MANIFEST]
     capsys.readouterr()
     assert main(["estimate", str(root / "in" / "a" / "0.npy"), str(root / "in" / "b" / "0.npy"),
                  "-K", str(root / "k.json"), "-o", str(root / "out3"), "-q"]) == 1
@@ -173,8 +173,13 @@ def test_killed_run_resumes_to_the_same_files(tmp_path):
     for p in done:  # complete files only
         want = dn.estimate_normals(_frame(int(p.stem) % 7, shape=(120, 160)), K, method="sda-sne")
         assert np.load(p).tobytes() == want.tobytes()
-    leftovers = [p.name for p in out.iterdir() if p.suffix != ".npy" and p.name != jobs.MANIFEST]
+    leftovers = [p.name for p in out.iterdir() if p.suffix != ".npy"
+                 and p.name not in (jobs.MANIFEST, jobs.INPUTS_LOG)]
     assert all(name.startswith(".") and name.endswith(".tmp") for name in leftovers), leftovers
+    # an output whose inputs-log line the kill cut off (written, not yet logged) is done again
+    logged = set(jobs._read_inputs_log(out))
+    assert logged <= {p.name for p in done}
+    assert len(logged) >= max(1, len(done) - (os.cpu_count() or 1))  # at most one a thread
     res = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=300, check=True)
-    assert f"{n} frames by sda-sne ({n - len(done)} computed, {len(done)} done before)" in res.stdout
+    assert f"{n} frames by sda-sne ({n - len(logged)} computed, {len(logged)} done before)" in res.stdout
     assert len(list(out.glob("*.npy"))) == n

@@ -47,10 +47,11 @@ def frames(tmp_path_factory):
 
 def _files(folder: Path) -> dict[str, bytes]:
     """Every file under ``folder`` by relative path, but the temporary files of atomic writes
-    (hidden ``.*.tmp``), which a worker killed mid-write leaves behind, and the run's manifest."""
+    (hidden ``.*.tmp``), which a worker killed mid-write leaves behind, and the run's manifest
+    and inputs log (its lines in the order the frames finished)."""
     return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*"))
             if p.is_file() and not (p.name.startswith(".") and p.name.endswith(".tmp"))
-            and p.name != jobs.MANIFEST}
+            and p.name not in (jobs.MANIFEST, jobs.INPUTS_LOG)}
 
 
 def test_estimate_on_cluster_equals_serial(client, frames, tmp_path):

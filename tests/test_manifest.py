@@ -239,3 +239,68 @@ def test_forced_run_over_fewer_frames_does_not_vouch_for_the_rest(folder, capsys
     assert _run(folder, "-m", "fals") == 0
     assert "(3 computed, 0 done before)" in capsys.readouterr().out
     assert json.loads((folder / "out" / jobs.MANIFEST).read_text())["settings"]["method"] == "fals"
+
+
+def test_a_regenerated_dataset_read_into_the_same_folder_is_computed_again(tmp_path, capsys):
+    """A dataset folder's frames carry no depth file of their own to date; the inputs log
+    records each frame's digest, so frames regenerated under the same names are computed
+    again (before: all 'done before', the old normals kept)."""
+    import shutil
+
+    import depthnormals as dn
+    from depthnormals.datasets import open as open_dataset
+    from depthnormals.synth import generate
+
+    ds, out = tmp_path / "ds", tmp_path / "out"
+    argv = ["estimate", str(ds), "-o", str(out), "-m", "d2nt", "-q"]
+    kw = dict(indoor=1, outdoor=0, views=2, size=(30, 40), noise=(), K=(22.0, 22.0, 19.5, 14.5),
+              progress=False)
+    generate(ds, seed=0, **kw)
+    assert main(argv) == 0
+    assert main(argv) == 0
+    assert "(0 computed, 2 done before)" in capsys.readouterr().out
+    shutil.rmtree(ds)
+    generate(ds, seed=1, **kw)
+    assert main(argv) == 0
+    assert "(2 computed, 0 done before)" in capsys.readouterr().out
+    for f in open_dataset(ds):
+        got = np.load(out / f.group / f"{f.name}.npy")
+        assert got.tobytes() == dn.estimate_normals(f.depth, f.K, method="d2nt").tobytes()
+    log = (out / jobs.INPUTS_LOG).read_text().splitlines()
+    assert len(log) == 2  # compacted: one line an output
+    assert main(argv) == 0
+    assert "(0 computed, 2 done before)" in capsys.readouterr().out
+
+
+def test_a_depth_file_replaced_by_an_older_copy_is_computed_again(folder, capsys):
+    """make's rule misses a depth file replaced by another with an older time (``cp -p``,
+    rsync, an unpacked archive); the inputs log's size and time do not."""
+    import os
+
+    assert _run(folder) == 0
+    capsys.readouterr()
+    src = folder / "in" / "1.png"
+    z = make_scene("tilted-plane").render(K=K, shape=(36, 48)).depth
+    src.write_bytes(encode_png(np.round(z * 1000).astype(np.uint16)))
+    t = (folder / "out" / "1.npy").stat().st_mtime_ns - 10**9
+    os.utime(src, ns=(t, t))  # older than the output it replaces
+    assert _run(folder) == 0
+    assert "(1 computed, 2 done before)" in capsys.readouterr().out
+    import depthnormals as dn
+
+    want = dn.estimate_normals(dn.io.read_depth(src, depth_scale=0.001), K)
+    assert np.load(folder / "out" / "1.npy").tobytes() == want.tobytes()
+
+
+def test_a_torn_or_missing_inputs_log_line_recomputes_only_that_output(folder, capsys):
+    """A run killed between writing an output and logging it: that output alone is done again;
+    a line cut short is ignored."""
+    assert _run(folder) == 0
+    capsys.readouterr()
+    log = folder / "out" / jobs.INPUTS_LOG
+    lines = log.read_text().splitlines()
+    assert len(lines) == 3 and all(json.loads(line)["input"].startswith("file ") for line in lines)
+    log.write_text("\n".join(lines[:2]) + "\n" + lines[2][:17])  # the last line torn
+    assert _run(folder) == 0
+    assert "(1 computed, 2 done before)" in capsys.readouterr().out
+    assert len(log.read_text().splitlines()) == 3

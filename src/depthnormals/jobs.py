@@ -24,6 +24,13 @@ recompute: ``resume=False`` / ``--no-resume``); outputs found in a folder withou
 are recomputed, never taken as done, and so is an output older than its depth file. A run
 that fails before it writes any frame leaves no manifest, and no output folder it created
 itself.
+
+The inputs log: beside the manifest, :data:`INPUTS_LOG` (``depthnormals-inputs.log``) records,
+for each output as it is written, what it was computed from: a depth file's size and
+modification time, a dataset frame's digest (its depth and camera, bit for bit). A resumed run
+skips an output only when its input is recorded and unchanged, so a regenerated dataset read
+into the same folder, or a depth file replaced by another (an older copy included), is
+computed again; an output whose line a killed run did not write is computed again too.
 """
 
 from __future__ import annotations
@@ -40,16 +47,18 @@ from typing import Any
 
 import numpy as np
 
-from ._fingerprint import code_fingerprint
+from ._fingerprint import array_digest, code_fingerprint
 from .camera import Intrinsics, as_intrinsics
 from .io import DEPTH_SUFFIXES, VIS_CONVENTIONS, not_depth_reason
 
-__all__ = ["FORMATS", "MANIFEST", "EstimateJob", "EstimateSettings", "RunSummary", "SettingsMismatch",
-           "estimate_job", "manifest_settings", "normals_and_uncertainty", "plan_estimate",
-           "run_estimate", "uncertainty_path", "write_uncertainty"]
+__all__ = ["FORMATS", "INPUTS_LOG", "MANIFEST", "EstimateJob", "EstimateSettings", "RunSummary",
+           "SettingsMismatch", "estimate_job", "manifest_settings", "normals_and_uncertainty",
+           "plan_estimate", "run_estimate", "uncertainty_path", "write_uncertainty"]
 
 #: The manifest file of an output folder (see the module docstring).
 MANIFEST = "depthnormals-manifest.json"
+#: The log of what each output of a folder was computed from (see the module docstring).
+INPUTS_LOG = "depthnormals-inputs.log"
 _MANIFEST_FORMAT = "depthnormals-estimate"
 
 #: Output formats of the many-frames form (the suffix of each output file).
@@ -379,6 +388,66 @@ def _changed_since(job: EstimateJob) -> bool:
         return True
 
 
+def _input_key(job: EstimateJob) -> str:
+    """What the job's output is computed from, as the inputs log records it: a depth file's
+    size and modification time (ns), or the digest of a dataset frame's depth and camera."""
+    if job.source is not None:
+        try:
+            st = Path(job.source).stat()
+        except OSError:
+            return "file missing"
+        return f"file {st.st_size} {st.st_mtime_ns}"
+    return f"data {array_digest(job.depth, job.K.matrix)}"
+
+
+def _read_inputs_log(out: Path) -> dict[str, str]:
+    """The inputs log of ``out``: output (relative, posix) -> input key, the last line of each
+    output winning; a line cut short by a killed run is ignored."""
+    path = out / INPUTS_LOG
+    if not path.is_file():
+        return {}
+    found: dict[str, str] = {}
+    for line in path.read_text(errors="replace").splitlines():
+        try:
+            entry = json.loads(line)
+            found[str(entry["output"])] = str(entry["input"])
+        except (json.JSONDecodeError, KeyError, TypeError):
+            continue
+    return found
+
+
+def _log_line(rel: str, key: str) -> str:
+    return json.dumps({"output": rel, "input": key}) + "\n"
+
+
+def _open_inputs_log(out: Path) -> Any:
+    """The inputs log opened for appending, on a line of its own (after a line a killed run
+    cut short, a newline first)."""
+    path = out / INPUTS_LOG
+    torn = False
+    if path.is_file() and path.stat().st_size:
+        with open(path, "rb") as f:
+            f.seek(-1, 2)
+            torn = f.read(1) != b"\n"
+    log = open(path, "a", encoding="utf-8")  # the caller closes it
+    if torn:
+        log.write("\n")
+    return log
+
+
+def _compact_inputs_log(out: Path) -> None:
+    """Rewrite the log (atomically) with one line per output that exists, when it has more."""
+    from .io import write_bytes_atomic
+
+    path = out / INPUTS_LOG
+    if not path.is_file():
+        return
+    lines = path.read_text(errors="replace").splitlines()
+    found = {rel: key for rel, key in _read_inputs_log(out).items() if (out / rel).is_file()}
+    if len(found) != len(lines):
+        write_bytes_atomic(path, "".join(_log_line(r, k) for r, k in sorted(found.items())).encode())
+
+
 def _read_manifest(path: Path) -> dict[str, Any] | None:
     if not path.is_file():
         return None
@@ -428,6 +497,7 @@ def _remove_run_traces(out: Path, created: bool) -> None:
     """After a run that wrote no frame: its manifest, and the folder if this run created it
     (only when nothing but empty folders is left in it)."""
     (out / MANIFEST).unlink(missing_ok=True)
+    (out / INPUTS_LOG).unlink(missing_ok=True)
     if created and out.is_dir() and not any(p.is_file() for p in out.rglob("*")):
         shutil.rmtree(out, ignore_errors=True)
 
@@ -516,6 +586,10 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
     fresh = created or not any(p.is_file() for p in out.rglob("*"))
     if not trusted and not fresh:
         (out / MANIFEST).unlink(missing_ok=True)
+        (out / INPUTS_LOG).unlink(missing_ok=True)  # every output there is computed again
+    recorded = _read_inputs_log(out) if trusted else {}
+    root = out.absolute()
+    keys: dict[Path, str] = {}
     t0 = time.perf_counter()
     counts = {"planned": 0, "skipped": 0, "written": 0}
     planned: set[Path] = set()
@@ -528,7 +602,9 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
             counts["planned"] += 1
             if not trusted and not fresh:
                 planned.add(job.output)
-            if resume and trusted and job.output.is_file() and not _changed_since(job):
+            key = keys[job.output] = _input_key(job)
+            if (resume and trusted and job.output.is_file() and not _changed_since(job)
+                    and recorded.get(job.output.relative_to(root).as_posix()) == key):
                 counts["skipped"] += 1
                 bar.update(f"{job.label} (done before)")
                 continue
@@ -538,9 +614,15 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
             yield job
 
     func = partial(estimate_job, settings=settings)
+    log = None
     try:
         with Progress("estimate", unit="frame", enabled=progress) as bar:
             def on_done(job: EstimateJob, result: tuple[str, int]) -> None:
+                nonlocal log
+                if log is None:
+                    log = _open_inputs_log(out)
+                log.write(_log_line(job.output.relative_to(root).as_posix(), keys.pop(job.output)))
+                log.flush()
                 counts["written"] += 1
                 if result[1] == 0:
                     no_normal.append(result[0])
@@ -554,9 +636,14 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
             else:
                 results = map_batches(func, todo(), on_done=on_done)
     except BaseException:
+        if log is not None:
+            log.close()
         if fresh and counts["written"] == 0:
             _remove_run_traces(out, created)
         raise
+    if log is not None:
+        log.close()
+        _compact_inputs_log(out)
     if counts["planned"] == 0:
         raise ValueError(f"the inputs {', '.join(map(str, inputs))} hold no frame")
     stale: list[str] = []
