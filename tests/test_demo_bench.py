@@ -49,3 +49,23 @@ def test_bench_prints_a_row_per_method_with_ratios(capsys):
     assert "opencv-fals" in rows and "3f2n" in rows and "d2nt" in rows
     ms, ratio = float(rows["3f2n"][0]), float(rows["3f2n"][1])
     assert ms > 0 and ratio > 0
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["demo", "--noise", "-1"], "--noise must be finite and >= 0"),
+    (["demo", "--noise", "nan"], "--noise must be finite and >= 0"),
+    (["demo", "-o", "{tmp}/picture.txt"], "must end in .png"),
+    (["bench", "--repeats", "0"], "--repeats must be >= 1"),
+    (["bench", "--warmup", "-1"], "--warmup must be >= 0"),
+    (["ablate", "--analytic", "--table", "1", "--noise", "-0.1"], "noise must be finite and >= 0"),
+])
+def test_bad_numbers_are_refused_not_read_another_way(tmp_path, capsys, argv, message):
+    """Before: a negative demo noise ran noise-free and printed "noise -1 z/f"; --repeats 0
+    timed one run (the compile included) and printed "medians of 0 runs"; a .txt output
+    got a PNG; a negative ablation noise added noise of the opposite sign."""
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    if argv[0] == "demo" and "-o" not in argv:
+        argv += ["-o", str(tmp_path / "d.png")]
+    assert main(argv) == 1
+    assert message in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())

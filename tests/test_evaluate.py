@@ -419,6 +419,19 @@ def test_frames_iterable_and_bad_input(tiny_3f2n, tmp_path):
     with pytest.raises(FileNotFoundError, match="does not exist"):
         run_evaluation(tmp_path / "missing", "3f2n", tmp_path / "d", figures=0)
     assert not (tmp_path / "d").exists()     # nothing written for a missing dataset
+    with pytest.raises(ValueError, match="error_vmax must be finite and > 0"):
+        run_evaluation(tiny_3f2n, "3f2n", tmp_path / "e", error_vmax=0)
+    assert not (tmp_path / "e").exists()
+
+
+def test_a_border_that_leaves_no_pixel_is_refused(tiny_3f2n, tmp_path):
+    """Before: every pixel left out, the run "succeeded" with a table of "-"."""
+    h, w = next(iter(dn.datasets.open(tiny_3f2n))).depth.shape
+    with pytest.raises(ValueError, match=f"leaves no pixel of a {w}x{h} image"):
+        run_evaluation(tiny_3f2n, "3f2n", tmp_path, figures=0, protocol=Protocol(border=min(h, w) // 2))
+    res = run_evaluation(tiny_3f2n, "3f2n", tmp_path / "b", figures=0,
+                         protocol=Protocol(border=(min(h, w) - 1) // 2))
+    assert all(r["scored"] > 0 for r in res.rows)
 
 
 def test_import_stays_light():

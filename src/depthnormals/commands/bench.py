@@ -205,6 +205,10 @@ def run(args: argparse.Namespace) -> int:
     # Start numba's thread pool before a peer loads its own TBB (Open3D ships an older one,
     # which numba would then pick up and reject with a NumbaWarning).
     numba.get_num_threads()
+    if args.repeats < 1:
+        raise ValueError(f"--repeats must be >= 1 (timed runs per method); got {args.repeats}")
+    if args.warmup < 0:
+        raise ValueError(f"--warmup must be >= 0; got {args.warmup}")
     names = args.methods.split(",") if args.methods else list(methods())
     sizes = [parse_size(s) for s in args.sizes.split(",")]
     thread_list = _parse_threads(args.threads)

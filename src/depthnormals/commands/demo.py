@@ -68,12 +68,16 @@ def parse_size(text: str) -> tuple[int, int]:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from .._validate import check_real
     from ..analytic import DEFAULT_K, DEFAULT_SHAPE, make_scene
     from ..io import write_png
     from ..metrics import angular_error, normal_metrics
     from ..registry import DEFAULT_METHOD, estimate_normals
 
     h, w = parse_size(args.size)
+    check_real(args.noise, "--noise", minimum=0.0, hint="sigma in units of z/f; 0: none")
+    if args.output.suffix.lower() != ".png":
+        raise ValueError(f"the picture is a PNG: -o must end in .png; got {args.output}")
     K = DEFAULT_K.scaled(w / DEFAULT_SHAPE[1]) if (h, w) != DEFAULT_SHAPE else DEFAULT_K
     render = make_scene(args.scene).render(K, (h, w))
     depth = render.depth.astype(np.float32)

@@ -10,6 +10,7 @@ from collections.abc import Iterator, Sequence
 
 import numpy as np
 
+from .._validate import check_real
 from ..analytic import make_scene
 from ._frame import Frame
 
@@ -33,13 +34,23 @@ def analytic_frames(noise: float = 0.1, seed: int = 0, *,
     scenes : sequence of str, keyword-only
         Names for :func:`depthnormals.analytic.make_scene`.
 
-    Yields
-    ------
-    Frame
+    Returns
+    -------
+    iterator of Frame
         Group ``"<scene>/clean"`` then ``"<scene>/noise<noise>"``, name ``"0"``; the exact
         normals and mask; ``meta["clean_depth"]`` holds the noise-free depth (for edge bands
         computed on the clean geometry).
+
+    Raises
+    ------
+    ValueError
+        A negative or non-finite ``noise`` (at the call, before any frame is rendered).
     """
+    noise = check_real(noise, "noise", minimum=0.0, hint="sigma in units of z/f")  # at the call
+    return _frames(noise, seed, scenes)
+
+
+def _frames(noise: float, seed: int, scenes: Sequence[str]) -> Iterator[Frame]:
     for name in scenes:
         r = make_scene(name).render()
         K = r.K.matrix

@@ -122,6 +122,11 @@ def scoring_mask(truth: np.ndarray, mask: np.ndarray | None, *, border: int) -> 
     Returns
     -------
     ndarray of bool, shape (H, W)
+
+    Raises
+    ------
+    ValueError
+        A border that leaves no pixel of the image (a run would score nothing and print "-").
     """
     ok = _truth_valid(np.asarray(truth))
     if mask is not None:
@@ -132,6 +137,10 @@ def scoring_mask(truth: np.ndarray, mask: np.ndarray | None, *, border: int) -> 
             raise TypeError(f"mask must be a boolean array; got dtype {m.dtype}")
         ok = ok & m
     b = _check_int(border, "border")
+    h, w = ok.shape[:2]
+    if 2 * b >= min(h, w):
+        raise ValueError(f"a border of {b} px leaves no pixel of a {w}x{h} image to score; "
+                         f"use a border below {(min(h, w) + 1) // 2}")
     if b:
         ok[:b] = False
         ok[-b:] = False

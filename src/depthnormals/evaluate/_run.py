@@ -21,7 +21,7 @@ import numpy as np
 
 from .._fingerprint import array_digest, code_fingerprint
 from .._progress import Progress
-from .._validate import NoValidNormalWarning
+from .._validate import NoValidNormalWarning, check_positive
 from ..datasets import Frame
 from ._env import machine_description
 from ._methods import MethodSpec, resolve_methods
@@ -203,6 +203,7 @@ def plan_evaluation(
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int)
                                 or threads < 1):
         raise ValueError(f"threads must be a positive integer or None; got {threads!r}")
+    error_vmax = check_positive(error_vmax, "error_vmax")
     return EvaluationPlan(specs, protocol, frames, group_levels, figures, fig_label,
                           error_vmax, threads)
 
