@@ -398,3 +398,31 @@ def test_shared_number_checkers():
     for bad, exc in ((True, TypeError), (2.0, TypeError), (0, ValueError), (9, ValueError)):
         with pytest.raises(exc, match=r"r must"):
             check_int(bad, "r", minimum=1, maximum=8)
+
+
+@pytest.mark.parametrize("method", ["3f2n+", "3f2n", "fals", "pcl-covariance-matrix"])
+def test_masked_array_pixels_are_invalid_and_long_double_is_float64(method):
+    """A numpy masked array's mask is honoured (before: dropped by ``np.asarray``, so a pixel
+    masked out as too far still got a normal from the value under the mask), float and
+    integer, one frame, (H, W, 1) and a stack; ``np.longdouble`` depth is computed in float64
+    (before: numba's TypingError)."""
+    z, _ = plane((12, 14))
+    far = np.zeros(z.shape, bool)
+    far[:, 9:] = True
+    plain = np.where(far, np.nan, z)
+    want = dn.estimate_normals(plain, K, method=method)
+    got = dn.estimate_normals(np.ma.masked_array(z, mask=far), K, method=method)
+    np.testing.assert_array_equal(got, want)
+    assert np.isnan(got[far]).all() and np.isfinite(got[~far]).any()
+    one = dn.estimate_normals(np.ma.masked_array(z[..., None], mask=far[..., None]), K, method=method)
+    np.testing.assert_array_equal(one, want)
+    stack = dn.estimate_normals(np.ma.masked_array(np.stack([z, z]), mask=np.stack([far, ~far])),
+                                K, method=method)
+    np.testing.assert_array_equal(stack[0], want)
+    assert np.isnan(stack[1][~far]).all()
+    mm = np.round(z * 1000).astype(np.uint16)
+    got = dn.estimate_normals(np.ma.masked_array(mm, mask=far), K, method=method, depth_scale=0.001)
+    np.testing.assert_array_equal(got, dn.estimate_normals(np.where(far, 0, mm), K, method=method,
+                                                           depth_scale=0.001))
+    np.testing.assert_array_equal(dn.estimate_normals(z.astype(np.longdouble), K, method=method),
+                                  dn.estimate_normals(z, K, method=method))

@@ -84,17 +84,29 @@ def check_choice(value: Any, name: str, choices: tuple[str, ...] | list[str]) ->
     return value
 
 
+def unmasked(depth: Any) -> Any:
+    """A numpy masked array as a plain one whose masked pixels are invalid depth (NaN, 0 for
+    integers), so the mask is honoured rather than dropped (``np.asarray`` keeps the values
+    under the mask); anything else as it is."""
+    if isinstance(depth, np.ma.MaskedArray):
+        fill = 0 if depth.dtype.kind in "iub" else np.nan
+        return depth.filled(fill) if depth.dtype.kind in "iufb" else np.asarray(depth)
+    return depth
+
+
 def check_depth(depth: Any, *, depth_scale: float | None = None, name: str = "depth") -> np.ndarray:
     """Validate a depth map and return it as a native-endian, C-contiguous float array.
 
-    float32 and float64 are preserved (float16 becomes float32); integer depth needs an
-    explicit ``depth_scale`` (metres per unit, e.g. 0.001 for millimetres) and becomes float32.
-    Invalid values (0, negative, NaN, inf) are kept as they are: estimators mask them.
+    float32 and float64 are preserved (float16 becomes float32, extended precision float64);
+    integer depth needs an explicit ``depth_scale`` (metres per unit, e.g. 0.001 for
+    millimetres) and becomes float32. Invalid values (0, negative, NaN, inf) are kept as they
+    are: estimators mask them; so are the masked pixels of a numpy masked array (:func:`unmasked`).
     A single-channel image ``(H, W, 1)`` is taken as its one channel ``(H, W)``; any other
     3-D shape is refused (``(H, W, 3)`` / ``(H, W, 4)`` named as a colour image).
     """
     if isinstance(depth, (str, bytes)) or depth is None:
         raise TypeError(f"{name} must be a 2-D numeric array (H, W); got {type(depth).__name__}")
+    depth = unmasked(depth)
     arr = depth if isinstance(depth, np.ndarray) else np.asarray(depth)
     if arr.dtype == bool or arr.dtype.kind not in "iuf":
         raise TypeError(
@@ -121,6 +133,8 @@ def check_depth(depth: Any, *, depth_scale: float | None = None, name: str = "de
         return np.ascontiguousarray(arr.astype(np.float64) * scale, dtype=np.float32)
     if arr.dtype.itemsize < 4:
         arr = arr.astype(np.float32)
+    elif arr.dtype.itemsize > 8:  # extended precision (np.longdouble): the kernels take float64
+        arr = arr.astype(np.float64)
     dtype = arr.dtype.newbyteorder("=")
     out = np.ascontiguousarray(arr, dtype=dtype)
     if scale is not None and scale != 1.0:

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ._validate import unmasked
 from .registry import estimate_normals as _estimate_numba
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -329,7 +330,7 @@ def depth_normal(depth_mm: Any, fx: float, fy: float, k_size: int = 5,
     >>> n.shape, n.dtype, n[4, 5].tolist()
     ((8, 10, 3), dtype('float32'), [0.0, 0.0, -1.0])
     """
-    d = np.asarray(depth_mm)
+    d = np.asarray(unmasked(depth_mm))
     if d.ndim != 2:
         raise ValueError(f"depth_mm must be (H, W) depth in millimetres; got shape {d.shape}")
     if d.dtype == np.bool_ or not (np.issubdtype(d.dtype, np.integer)
