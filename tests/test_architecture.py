@@ -19,7 +19,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     # digests of code and data
     ("depthnormals._validate", "depthnormals._parallel", "depthnormals.camera", "depthnormals._png",
      "depthnormals.io", "depthnormals.metrics", "depthnormals.analytic", "depthnormals.render",
-     "depthnormals._progress", "depthnormals._fingerprint"),
+     "depthnormals._progress", "depthnormals._fingerprint", "depthnormals._numba_cache"),
     ("depthnormals.kernels",),  # shared compiled row kernels and their constants
     ("depthnormals.estimators",),  # one public function per estimator
     ("depthnormals.ddm",),  # the discontinuity discrimination module, fused 3F2N+

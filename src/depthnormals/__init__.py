@@ -13,7 +13,7 @@ datasets, io                       readers and writers
 
 from __future__ import annotations
 
-from . import datasets, io
+from . import _numba_cache, datasets, io  # noqa: F401 (_numba_cache first: before any kernel)
 from ._parallel import get_num_threads, set_num_threads
 from ._validate import NoValidNormalWarning
 from .camera import Intrinsics, as_intrinsics, backproject

@@ -15,7 +15,11 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["array_digest", "code_fingerprint"]
+__all__ = ["PACKAGE_ROOT", "array_digest", "code_fingerprint"]
+
+
+#: The folder of the installed ``depthnormals`` package.
+PACKAGE_ROOT = Path(__file__).resolve().parent
 
 
 @lru_cache(maxsize=1)
@@ -23,10 +27,9 @@ def code_fingerprint() -> str:
     """A hex digest of every Python module of the installed ``depthnormals`` package (its
     path inside the package and its bytes): any edit of the code changes it. Computed once per
     process (a few ms)."""
-    root = Path(__file__).resolve().parent
     h = hashlib.blake2b(digest_size=12)
-    for path in sorted(root.rglob("*.py")):
-        h.update(path.relative_to(root).as_posix().encode())
+    for path in sorted(PACKAGE_ROOT.rglob("*.py")):
+        h.update(path.relative_to(PACKAGE_ROOT).as_posix().encode())
         h.update(b"\0")
         h.update(path.read_bytes())
         h.update(b"\0")
