@@ -201,3 +201,30 @@ def test_evaluate_on_cluster_equals_serial(client, tmp_path, capsys):
         _without_ms(json.loads((tmp_path / "dask" / "summary.json").read_text()))
     assert main(dask) == 0  # resumed: nothing left for the workers
     assert "16 rows (0 computed, 16 reused" in capsys.readouterr().out
+
+
+def test_workers_of_another_build_are_refused_before_any_work(client, frames, tmp_path, monkeypatch):
+    """Workers left on another build of the library (here: this process's code digest
+    changed, the workers' not) would write outputs that pass for this run's (the manifest
+    records this process's digest): refused before any task, nothing written. Before: the run
+    went ahead."""
+    from depthnormals import _fingerprint
+
+    here = _fingerprint.code_fingerprint()
+    assert client.run(cluster._worker_code) == {w: here for w in client.scheduler_info()["workers"]}
+    monkeypatch.setattr(_fingerprint, "code_fingerprint", lambda: "0" * 24)
+    with pytest.raises(cluster.WorkerCodeMismatch, match="another build of depthnormals"):
+        jobs.run_estimate([frames], tmp_path / "out", method="3f2n", K=K, client=client)
+    assert not list(tmp_path.rglob("*.npy"))
+    monkeypatch.undo()
+    assert jobs.run_estimate([frames], tmp_path / "out", method="3f2n", K=K, client=client).written == 24
+
+
+def test_a_task_checks_its_workers_build_before_it_starts(tmp_path):
+    """A worker that joined after the cluster was checked: its first task refuses to run."""
+    calls = []
+    with pytest.raises(cluster.WorkerCodeMismatch, match="nothing was computed"):
+        cluster._run_batch(calls.append, [1, 2], "0" * 24)
+    assert calls == []
+    assert cluster._run_batch(calls.append, [1, 2], cluster._worker_code()) == [None, None]
+    assert calls == [1, 2]

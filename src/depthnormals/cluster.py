@@ -18,6 +18,13 @@ Scheduler addresses (:func:`parse_scheduler`): ``local`` (a ``distributed.LocalC
 one single-threaded worker process per core), ``local:N`` (N worker processes) or
 ``tcp://host:port`` (an existing ``dask scheduler``). Dask is imported only here, and only
 when a scheduler is asked for (``pip install 'depthnormals[dask]'``).
+
+Every worker must run the same build of the library as the caller, or its outputs would
+pass for this run's (``estimate`` and ``synth`` record the caller's code digest): before any
+task, :func:`map_batches` asks every worker for the digest of its ``depthnormals`` modules
+(:func:`depthnormals._fingerprint.code_fingerprint`), and each task checks it again on its
+worker before it starts (a worker that joined later); another build stops the run with
+:class:`WorkerCodeMismatch` before that worker computes or writes anything.
 """
 
 from __future__ import annotations
@@ -30,7 +37,8 @@ from dataclasses import dataclass
 from itertools import islice
 from typing import Any, TypeVar
 
-__all__ = ["SchedulerSpec", "connect", "local_cluster", "map_batches", "parse_scheduler"]
+__all__ = ["SchedulerSpec", "WorkerCodeMismatch", "connect", "local_cluster", "map_batches",
+           "parse_scheduler"]
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -46,6 +54,10 @@ _INFLIGHT_PER_THREAD = 2
 #: With these (the values glibc's own heuristic reaches in a plain process) the worker's
 #: compute thread costs what the serial run costs (benchmarks/dask_scaling.py).
 WORKER_MALLOC_ENV = {"MALLOC_MMAP_THRESHOLD_": "33554432", "MALLOC_TRIM_THRESHOLD_": "268435456"}
+
+
+class WorkerCodeMismatch(ValueError):
+    """A Dask worker runs another build of depthnormals than the caller (module docstring)."""
 
 
 @dataclass(frozen=True)
@@ -143,17 +155,48 @@ def local_cluster(n_workers: int, *, threads: int | None = None) -> Any:
                             dashboard_address=":0", env=env)
 
 
-def _run_batch(func: Callable[[T], R], items: Sequence[T]) -> list[R]:
-    """One Dask task: ``func`` on each item, on the worker. A worker running several tasks
-    at once (threads > 1) runs each serially inside, as the threads of :func:`map_threads` do."""
+def _worker_code() -> str:
+    """The digest of this process's ``depthnormals`` modules (run on each worker)."""
+    from ._fingerprint import code_fingerprint
+
+    return code_fingerprint()
+
+
+def _mismatch(worker: str, code: str, here: str) -> WorkerCodeMismatch:
+    return WorkerCodeMismatch(
+        f"Dask worker {worker} runs another build of depthnormals than this process (code {code}, "
+        f"here {here}): install the same version on every worker, or restart the workers started "
+        "before an upgrade; nothing was computed there")
+
+
+def _check_workers(client: Any, here: str) -> None:
+    """Refuse a cluster whose connected workers run another build (module docstring)."""
+    try:
+        found = client.run(_worker_code)
+    except Exception as exc:  # a worker without this check: an older build, or none at all
+        raise WorkerCodeMismatch(f"a Dask worker cannot run depthnormals' build check ({exc!r}): it "
+                                 "runs another build of depthnormals, or none; install the same "
+                                 "version on every worker") from exc
+    for worker, code in sorted(found.items()):
+        if code != here:
+            raise _mismatch(worker, code, here)
+
+
+def _run_batch(func: Callable[[T], R], items: Sequence[T], code: str) -> list[R]:
+    """One Dask task: ``func`` on each item, on the worker, once its library code is checked
+    to be ``code``'s. A worker running several tasks at once (threads > 1) runs each serially
+    inside, as the threads of :func:`map_threads` do."""
     from ._parallel import thread_limit
 
     try:
         from distributed import get_worker
 
-        threads = get_worker().state.nthreads
+        worker = get_worker()
+        threads, address = worker.state.nthreads, str(worker.address)
     except (ImportError, ValueError, AttributeError):
-        threads = 1
+        threads, address = 1, "?"
+    if _worker_code() != code:
+        raise _mismatch(address, _worker_code(), code)
     with thread_limit(1) if threads > 1 else contextlib.nullcontext():
         return [func(item) for item in items]
 
@@ -211,6 +254,8 @@ def map_batches(func: Callable[[T], R], items: Iterable[T], *, client: Any = Non
 
     from distributed import as_completed
 
+    here = _worker_code()
+    _check_workers(client, here)
     slots = max(1, sum(client.nthreads().values())) * _INFLIGHT_PER_THREAD
     batches = _chunks(items, batch_size)
     pending = as_completed()
@@ -218,7 +263,7 @@ def map_batches(func: Callable[[T], R], items: Iterable[T], *, client: Any = Non
 
     def submit(n: int) -> None:
         for batch in islice(batches, n):
-            fut = client.submit(_run_batch, func, batch, pure=False)
+            fut = client.submit(_run_batch, func, batch, here, pure=False)
             owner[fut.key] = batch
             pending.add(fut)
 
