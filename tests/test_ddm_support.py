@@ -14,7 +14,7 @@ import pytest
 
 import depthnormals as dn
 from depthnormals.analytic import make_scene, tilted_plane
-from depthnormals.ddm import auto, support
+from depthnormals.ddm import auto, noise, support
 from depthnormals.ddm.noise import QUANT_SHARE, noise_pass, quantisation_step
 from depthnormals.kernels.depth import prepare
 
@@ -50,7 +50,7 @@ def test_quantised_plane_reads_its_rounding_noise():
     z, cam = prepare(q, r.K, None)
     p = noise_pass(z, cam.fx, cam.fy)
     assert p.iid == 0.0
-    share, step = quantisation_step(z, cam.fx, cam.fy)
+    share, step, _ = quantisation_step(z, cam.fx, cam.fy)
     assert share >= QUANT_SHARE
     # the step at the plane's depth: dz = z^2 q / (f b) -> footprints dz f / z = z q f / (f b) * f
     zm = float(np.median(r.depth))
@@ -84,6 +84,67 @@ def test_quantised_plane_takes_the_measured_support_not_the_clean_branch():
     assert np.nanmean(e) < 1.5
     fals = dn.estimate_normals(q, r.K, method="fals", window=11)
     assert np.nanmean(e) < np.nanmean(dn.angular_error(fals, r.normals)[20:-20, 20:-20])
+
+
+def _room(shape=(240, 320)):
+    K2 = dn.as_intrinsics((262.5, 262.5, 159.5, 119.5))
+    return make_scene("demo-room").render(K=K2, shape=shape)
+
+
+def _on_grid(depth, q_m):
+    return np.where(depth > 0, np.round(depth / q_m) * q_m, 0).astype(np.float32)
+
+
+def test_depth_on_a_millimetre_grid_reads_its_rounding_noise():
+    """A clean render rounded to millimetres (a 16-bit PNG's units): on its fronto-parallel and
+    gently sloped surfaces most second differences are exactly 0 and too few neighbours are
+    equal on the slopes for plateaus (share < QUANT_SHARE), so the level read 0 and the frame
+    took the clean branch. The grid's quantum (1 mm over ``z / f`` footprints) now enters as
+    rounding noise: the level is about ``median(q f / z) / sqrt(12)``."""
+    r = _room()
+    z, cam = prepare(_on_grid(r.depth, 1e-3), r.K, None)
+    p = noise_pass(z, cam.fx, cam.fy)
+    assert p.iid < 1e-3 and p.quant_share < QUANT_SHARE and not p.plateaus
+    valid = r.depth > 0
+    # the samples are sloped surfaces (near ones count more than in the image's median)
+    assert 0.5 < p.grid / np.median(1e-3 * cam.fx / r.depth[valid]) < 2.0
+    assert p.quant_step == p.grid and p.sigma == pytest.approx(p.grid / math.sqrt(12.0), rel=0.05)
+    for depth in (r.depth, r.depth * (1 + np.random.default_rng(0).normal(size=r.depth.shape) * 1e-3)):
+        z, cam = prepare(depth, r.K, None)  # float depth: no grid
+        assert noise_pass(z, cam.fx, cam.fy).grid == 0.0
+
+
+def test_a_grid_under_stronger_noise_is_left_out():
+    """Sensor depth stored in millimetres (the synthetic kinect_v2 and tof models, real ToF):
+    the second-difference level is many times the grid's rounding noise, which is then left
+    out (quant_step_of), so those frames keep their level to the bit."""
+    r = _room()
+    rng = np.random.default_rng(2)
+    noisy = r.depth + rng.normal(size=r.depth.shape) * 0.004
+    z, cam = prepare(_on_grid(noisy, 1e-3), r.K, None)
+    p = noise_pass(z, cam.fx, cam.fy)
+    assert p.grid > 0.0 and p.quant_step == 0.0 and p.sigma == p.iid
+    # counted where its rounding noise grid / sqrt(12) is at least a third of the level
+    assert noise.quant_step_of(0.2, 0.0, 0.3) == 0.3 and noise.quant_step_of(0.5, 0.0, 0.3) == 0.0
+    assert noise.quant_step_of(0.0, 0.7, 0.3) == 0.7  # plateaus first
+
+
+@pytest.mark.parametrize("q_mm", [1.0, 2.0])
+def test_the_default_on_millimetre_depth_takes_the_box_fit_and_maps_its_error(q_mm):
+    """Measured on demo-room (session 29): rounded to 1 and 2 mm the default took the plane
+    hypotheses, mean error 0.19 / 0.36 deg at 320 x 240 (0.42 / 0.75 at 640 x 480), and its
+    map read 0.01-0.02 deg, 10-57x too confident; now the box-fit over the rounding noise,
+    0.11 / 0.23 deg, and a map that is not below the error (it over-reads the edges here, as
+    on this scene's i.i.d. noise)."""
+    r = _room()
+    d = _on_grid(r.depth, q_mm * 1e-3)
+    assert dn.noise_profile(d, r.K).branch == "box-fit"
+    n, u = dn.estimate_normals(d, r.K, return_uncertainty=True)
+    e = dn.angular_error(n, r.normals)
+    planes = dn.estimate_normals(d, r.K, selection="planes")
+    e_planes = dn.angular_error(planes, r.normals)
+    assert np.nanmean(e) < 0.7 * np.nanmean(e_planes)
+    assert 0.5 < np.nanmean(u) / np.nanmean(e) < 12.0
 
 
 @pytest.mark.parametrize("window", [1, 7])

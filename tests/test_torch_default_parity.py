@@ -54,13 +54,15 @@ def _check(depths, Ks, label, **options):
 
 
 def _frames():
-    """Small analytic frames: clean, Gaussian noise 0.3 footprints, and the four sensor models."""
+    """Small analytic frames: clean, clean rounded to millimetres (the depth grid's rounding
+    noise, ddm.noise.grid_quantum), Gaussian noise 0.3 footprints, and the four sensor models."""
     rng = np.random.default_rng(3)
     out = []
     for name in scene_names():
         r = make_scene(name).render(K=K_SMALL, shape=(120, 160))
         if name != "stairs":  # see below
             out.append((f"{name} clean", r.depth))
+        out.append((f"{name} mm", np.where(r.depth > 0, np.round(r.depth * 1000) / 1000, 0)))
         noisy = r.depth + rng.normal(size=r.depth.shape) * 0.3 * r.depth / K_SMALL[0]
         out.append((f"{name} gaussian", noisy))
         for model, fn in MODELS.items():

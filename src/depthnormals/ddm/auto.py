@@ -203,7 +203,7 @@ def needs_measured_support(noise: NoiseSamples, prof: SupportProfile) -> bool:
     what its level predicts for independent noise by more than :data:`EXCESS`
     (:meth:`SupportProfile.excess`); False (the tuned box-fit) for independent noise. The one
     rule of :func:`noisy_select`, :func:`noise_profile` and the uncertainty map."""
-    return noise.quant > noise.iid or not prof.excess() <= EXCESS  # NaN: measured
+    return (noise.plateaus and noise.quant > noise.iid) or not prof.excess() <= EXCESS  # NaN: measured
 
 
 def noisy_select(z: np.ndarray, base: np.ndarray | None, fx: float, fy: float, cx: float,

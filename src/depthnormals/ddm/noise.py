@@ -29,6 +29,13 @@ differences is at least :data:`QUANT_SHARE`, the depth is quantised with a step 
 quadrature to the second-difference level. The result is the i.i.d. noise equivalent of the
 two, in one unit (footprints ``z / f``), never 0 on quantised sensor depth.
 
+**Depth on a grid.** Depth stored in integer units (millimetre PNGs of renders or of low-noise
+sensors) may show no plateaus on its slopes (most neighbours differ) and still read 0 by the
+median (its flat parts hold equal values). The plateau search therefore also checks whether
+its non-zero neighbour differences are multiples of the least one (:func:`grid_quantum`); if
+so, that quantum's rounding noise enters the level like the plateaus' step, where it is not
+small beside the second-difference level (:func:`quant_step_of`).
+
 Ours (docs/3f2n-plus.md, "The noise model of real sensors"); nothing in the 3F2N+ paper
 estimates noise.
 """
@@ -43,8 +50,9 @@ import numpy as np
 
 from ..kernels.depth import prepare
 
-__all__ = ["QUANT_SHARE", "QUANT_SPAN", "TILE", "NoiseSamples", "estimate_noise", "estimate_noise_map",
-           "noise_levels", "noise_pass", "noise_tiles"]
+__all__ = ["GRID_SHARE", "GRID_TOL", "QUANT_SHARE", "QUANT_SPAN", "TILE", "NoiseSamples",
+           "estimate_noise", "estimate_noise_map", "grid_quantum", "noise_levels", "noise_pass",
+           "noise_tiles", "quant_step_of"]
 
 _MAD = 0.6744897501960817  # median of |N(0, 1)|
 _SQRT6 = 6.0 ** 0.5
@@ -68,6 +76,16 @@ QUANT_EDGE = 20.0
 #: float renders and on noisy depth (every neighbour differs), 0.40-0.81 on the Kinect v1 /
 #: Xtion frames of ``shared/data/real-sensors`` (docs/3f2n-plus.md).
 QUANT_SHARE = 0.3
+#: Depth on a grid (:func:`grid_quantum`): at least this share of the plateau search's
+#: non-zero neighbour differences within GRID_TOL of a multiple of the least one (1.0 on
+#: millimetre depth, 0.10-0.11 on float renders and on noisy float depth), from GRID_MIN of them.
+GRID_SHARE = 0.9
+GRID_TOL = 0.05
+GRID_MIN = 50
+#: The grid's rounding noise counts where it is at least 1 / GRID_DOMINANCE of the
+#: second-difference level (:func:`quant_step_of`): on sensor depth stored in millimetres
+#: (synthetic kinect_v2 and tof, iid 12-30x the rounding noise) it is left out.
+GRID_DOMINANCE = 3.0
 
 
 def noise_from_prepared(z: np.ndarray, fx: float, fy: float) -> float:
@@ -139,12 +157,13 @@ def _tile_samples(z, fx, fy, tile, stride, every, starts):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _plateau_samples(z, fx, fy, stride, span, edge, out_steps):
+def _plateau_samples(z, fx, fy, stride, span, edge, out_steps, out_raw):
     """The plateau search of the module doc on every ``stride``-th row (neighbours along the
     row) and column (along the column): at each pixel ``u`` whose depths at ``u +- span``
     differ by less than ``edge`` footprints per pixel (and do differ), the neighbour
     difference ``z(u + 1) - z(u)``. Writes the non-zero ones (footprints ``|dz| f / z``,
-    below ``edge``) into ``out_steps``; returns ``(tested, zero, steps)`` counts."""
+    below ``edge``) into ``out_steps`` and the same in depth units (``|dz|``) into
+    ``out_raw``; returns ``(tested, zero, steps)`` counts."""
     h, w = z.shape
     tested = 0
     zero = 0
@@ -177,21 +196,63 @@ def _plateau_samples(z, fx, fy, stride, span, edge, out_steps):
                     zero += 1
                 elif n < out_steps.size:
                     out_steps[n] = step
+                    out_raw[n] = abs(d - c)
                     n += 1
     return tested, zero, n
 
 
-def quantisation_step(z: np.ndarray, fx: float, fy: float) -> tuple[float, float]:
-    """The plateau search of the module doc on prepared depth: ``(share, step)``, the share
-    of exactly equal neighbours on sloped surfaces and the median non-zero step
-    (footprints); ``step`` is 0 where ``share < QUANT_SHARE`` (not quantised), ``share`` NaN
-    where nothing was tested."""
+def quantisation_step(z: np.ndarray, fx: float, fy: float) -> tuple[float, float, float]:
+    """The plateau search of the module doc on prepared depth: ``(share, step, grid)``, the
+    share of exactly equal neighbours on sloped surfaces, the median non-zero step
+    (footprints; 0 where ``share < QUANT_SHARE``: no plateaus) and the depth grid's quantum
+    (footprints, :func:`grid_quantum`; 0 where the depth lies on no grid); ``share`` NaN where
+    nothing was tested."""
     h, w = z.shape
-    steps = np.empty((h // QUANT_STRIDE + 1) * w + (w // QUANT_STRIDE + 1) * h)
+    size = (h // QUANT_STRIDE + 1) * w + (w // QUANT_STRIDE + 1) * h
+    steps = np.empty(size)
+    raw = np.empty(size)
     tested, zero, n = _plateau_samples(z, float(fx), float(fy), QUANT_STRIDE, QUANT_SPAN,
-                                       QUANT_EDGE, steps)
-    return quantisation_from_counts(tested, zero, n,
-                                    lambda: float(np.partition(steps[:n], n // 2)[n // 2]))
+                                       QUANT_EDGE, steps, raw)
+    share, step = quantisation_from_counts(tested, zero, n,
+                                           lambda: float(np.partition(steps[:n], n // 2)[n // 2]))
+    return share, step, grid_quantum(steps[:n], raw[:n])
+
+
+def grid_quantum(steps: np.ndarray, raw: np.ndarray) -> float:
+    """The quantum of depth that lies on a grid (integer millimetres, a 16-bit PNG's units),
+    in footprints: ``q f / z`` (upper median over the samples), ``q`` the least non-zero
+    neighbour difference, where at least :data:`GRID_SHARE` of the differences ``raw`` (depth
+    units; ``steps`` the same in footprints) are within :data:`GRID_TOL` of a multiple of
+    ``q``; else 0 (float renders, noisy depth: ~10 % are)."""
+    n = raw.size
+    q = float(raw.min()) if n else 0.0
+    if n < GRID_MIN or not q > 0.0:
+        return 0.0
+    on = int(np.count_nonzero(np.abs(raw / q - np.round(raw / q)) < GRID_TOL))
+    per = steps * (q / raw)
+    return grid_from_counts(n, q, on, lambda: float(np.partition(per, n // 2)[n // 2]))
+
+
+def grid_from_counts(n: int, q: float, on: int, quantum_median) -> float:
+    """:func:`grid_quantum`'s verdict from its counts: ``n`` non-zero differences, the least
+    ``q``, ``on`` of them on its grid; ``quantum_median()`` the upper median of ``q f / z``,
+    asked for only on a grid. The one rule of the numba pass and of its torch port."""
+    if n < GRID_MIN or not q > 0.0 or on < GRID_SHARE * n:
+        return 0.0
+    return quantum_median()
+
+
+def quant_step_of(iid: float, step: float, grid: float) -> float:
+    """The step whose rounding noise enters the level: the plateaus' ``step`` where there are
+    plateaus; else the grid's quantum ``grid`` where its rounding noise ``grid / sqrt(12)``
+    is at least a :data:`GRID_DOMINANCE` th of the second-difference level ``iid`` (depth on
+    a grid whose rounding the second differences read as 0: most neighbours are equal); else
+    0. The one rule of the numba pass and of its torch port."""
+    if step > 0.0:
+        return step
+    if grid > 0.0 and iid < GRID_DOMINANCE * grid / _SQRT12:
+        return grid
+    return 0.0
 
 
 def quantisation_from_counts(tested: int, zero: int, n_steps: int, step_median) -> tuple[float, float]:
@@ -248,14 +309,16 @@ class NoiseSamples:
     reads."""
 
     def __init__(self, every: np.ndarray, starts: np.ndarray, shape: tuple[int, int],
-                 quant: tuple[float, float] = (float("nan"), 0.0)):
+                 quant: tuple[float, float, float] = (float("nan"), 0.0, 0.0)):
         self._every = every
         self._starts = starts
         self._shape = shape
         n = every.size
         # numpy's selection (a copy: the tiles' samples stay in place)
         self.iid = iid_level(_median_nonneg(every), n) if n else float("nan")
-        self.quant_share, self.quant_step = quant
+        self.quant_share, plateau_step, self.grid = quant
+        self.quant_step = quant_step_of(self.iid, plateau_step, self.grid)
+        self.plateaus = plateau_step > 0.0
         self.quant, self.sigma = combined_level(self.iid, self.quant_step)
 
     def tiles(self) -> np.ndarray:

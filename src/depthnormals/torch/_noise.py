@@ -20,6 +20,7 @@ import torch
 from ..ddm.noise import (
     _MAD,
     _SQRT6,
+    GRID_TOL,
     QUANT_EDGE,
     QUANT_SPAN,
     QUANT_STRIDE,
@@ -27,7 +28,9 @@ from ..ddm.noise import (
     TILE_MIN,
     TILE_STRIDE,
     combined_level,
+    grid_from_counts,
     iid_level,
+    quant_step_of,
     quantisation_from_counts,
 )
 
@@ -37,13 +40,16 @@ __all__ = ["FrameNoise", "noise_pass"]
 class FrameNoise:
     """One frame's noise levels (host floats), as :class:`depthnormals.ddm.noise.NoiseSamples`
     names them: ``iid`` (second differences), ``quant_share``, ``quant_step``, ``quant``
-    (rounding noise), ``sigma`` (the two in quadrature)."""
+    (rounding noise), ``sigma`` (the two in quadrature), ``grid`` (the depth grid's quantum),
+    ``plateaus`` (the step is the plateaus')."""
 
     iid: float
     quant_share: float
     quant_step: float
     quant: float
     sigma: float
+    grid: float = 0.0
+    plateaus: bool = False
 
 
 def _kth_present(x: torch.Tensor, ok: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
@@ -137,8 +143,8 @@ def _nan64(z: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
 
 
 def _plateaus(z: torch.Tensor, valid: torch.Tensor, fx: torch.Tensor, fy: torch.Tensor):
-    """The plateau search of ddm.noise (``_plateau_samples``) on every frame: (steps,
-    step_ok) with steps (B, N) float64."""
+    """The plateau search of ddm.noise (``_plateau_samples``) on every frame: (steps, raw,
+    step_ok) with steps (B, N) float64 (footprints) and raw the same in depth units."""
     span, edge = QUANT_SPAN, QUANT_EDGE
     b = z.shape[0]
     parts = []
@@ -157,13 +163,14 @@ def _plateaus(z: torch.Tensor, valid: torch.Tensor, fx: torch.Tensor, fy: torch.
         ok = ~(torch.isnan(a) | torch.isnan(bb) | torch.isnan(c) | torch.isnan(d)) & (a != bb)
         fq = f.reshape(-1, 1, 1)
         ok = ok & ((bb - a).abs() * fq / c < 2.0 * span * edge)
-        step = (d - c).abs() * fq / c
+        raw = (d - c).abs()
+        step = raw * fq / c
         ok = ok & (step < edge)
-        parts.append((step.reshape(b, -1), ok.reshape(b, -1)))
+        parts.append((step.reshape(b, -1), raw.reshape(b, -1), ok.reshape(b, -1)))
     if not parts:
         zero = torch.zeros((b, 1), dtype=torch.float64, device=z.device)
-        return zero, zero.bool()
-    return torch.cat([p[0] for p in parts], 1), torch.cat([p[1] for p in parts], 1)
+        return zero, zero, zero.bool()
+    return tuple(torch.cat([p[i] for p in parts], 1) for i in range(3))
 
 
 class BatchNoise:
@@ -204,21 +211,29 @@ def noise_pass(z: torch.Tensor, valid: torch.Tensor, fx: torch.Tensor, fy: torch
         ok = samples.ok.reshape(b, -1)
         n = ok.sum(-1)
         iid_kth = _kth_present(x, ok, n // 2)
-        steps, sok = _plateaus(z, valid, fxb.reshape(-1), fyb.reshape(-1))
+        steps, raw, sok = _plateaus(z, valid, fxb.reshape(-1), fyb.reshape(-1))
         tested = sok.sum(-1)
         zero_ok = sok & (steps == 0.0)
         zero = zero_ok.sum(-1)
         nz_ok = sok & (steps != 0.0)
         nn = nz_ok.sum(-1)
         step_kth = _kth_present(steps, nz_ok, nn // 2)
+        # the depth grid (ddm.noise.grid_quantum): the least non-zero difference, how many
+        # differences lie on its multiples, the upper median of q f / z
+        q = torch.where(nz_ok, raw, torch.full_like(raw, float("inf"))).amin(-1, keepdim=True)
+        r = raw / q
+        on = (nz_ok & ((r - torch.round(r)).abs() < GRID_TOL)).sum(-1)
+        grid_kth = _kth_present(steps * (q / raw), nz_ok, nn // 2)
         f64 = torch.float64
-        host = torch.stack([iid_kth, n.to(f64), tested.to(f64), zero.to(f64), nn.to(f64), step_kth],
-                           1).cpu().tolist()
+        host = torch.stack([iid_kth, n.to(f64), tested.to(f64), zero.to(f64), nn.to(f64), step_kth,
+                            q[:, 0], on.to(f64), grid_kth], 1).cpu().tolist()
     frames = []
-    for kth, cnt, tst, zr, nnz, skth in host:
+    for kth, cnt, tst, zr, nnz, skth, qmin, ong, gkth in host:
         iid = iid_level(kth, cnt)
-        share, step = quantisation_from_counts(tst, zr, nnz, lambda skth=skth: skth)
+        share, plateau_step = quantisation_from_counts(tst, zr, nnz, lambda skth=skth: skth)
+        grid = grid_from_counts(int(nnz), qmin if nnz else 0.0, int(ong), lambda gkth=gkth: gkth)
+        step = quant_step_of(iid, plateau_step, grid)
         quant, sigma = combined_level(iid, step)
-        frames.append(FrameNoise(iid, share, step, quant, sigma))
+        frames.append(FrameNoise(iid, share, step, quant, sigma, grid, plateau_step > 0.0))
     return BatchNoise(frames, samples, ((h + tile - 1) // tile, (w + tile - 1) // tile))
 
