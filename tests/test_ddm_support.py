@@ -112,6 +112,14 @@ def test_depth_on_a_millimetre_grid_reads_its_rounding_noise():
     for depth in (r.depth, r.depth * (1 + np.random.default_rng(0).normal(size=r.depth.shape) * 1e-3)):
         z, cam = prepare(depth, r.K, None)  # float depth: no grid
         assert noise_pass(z, cam.fx, cam.fy).grid == 0.0
+    # float32's own spacing is a grid too (a nearly fronto-parallel plane: values a few ulps
+    # apart, every difference a multiple of one ulp), far too fine to be a depth unit
+    v, u = np.mgrid[0:120, 0:160]
+    ulp = 2.0 ** -22  # float32's spacing at 2 m
+    wall = (2.0 + 1.1 * ulp * u + 1.3 * ulp * v).astype(np.float32)
+    assert set(np.unique(np.diff(wall.astype(np.float64), axis=1) / ulp)) == {1.0, 2.0}
+    z, cam = prepare(wall, r.K, None)
+    assert noise.quantisation_step(z, cam.fx, cam.fy) == (0.0, 0.0, 0.0)
 
 
 def test_a_grid_under_stronger_noise_is_left_out():

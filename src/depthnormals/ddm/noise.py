@@ -82,6 +82,10 @@ QUANT_SHARE = 0.3
 GRID_SHARE = 0.9
 GRID_TOL = 0.05
 GRID_MIN = 50
+#: A grid finer than this many footprints is no depth unit but float32's own spacing (a
+#: render's nearly fronto-parallel wall: its values a few ulps apart, 1e-5 footprints), too
+#: fine to matter: not counted (millimetres at 6 m and f = 525 px: 0.09).
+GRID_FLOOR = 1e-3
 #: The grid's rounding noise counts where it is at least 1 / GRID_DOMINANCE of the
 #: second-difference level (:func:`quant_step_of`): on sensor depth stored in millimetres
 #: (synthetic kinect_v2 and tof, iid 12-30x the rounding noise) it is left out.
@@ -239,7 +243,8 @@ def grid_from_counts(n: int, q: float, on: int, quantum_median) -> float:
     asked for only on a grid. The one rule of the numba pass and of its torch port."""
     if n < GRID_MIN or not q > 0.0 or on < GRID_SHARE * n:
         return 0.0
-    return quantum_median()
+    quantum = quantum_median()
+    return quantum if quantum >= GRID_FLOOR else 0.0
 
 
 def quant_step_of(iid: float, step: float, grid: float) -> float:
