@@ -1,4 +1,4 @@
-"""numba's on-disk cache, made stale by any change of the package, not only of a function's file.
+"""numba's on-disk cache, stale when any code a compiled function can hold changes, not only its file.
 
 ``@njit(cache=True)`` keys a compiled function's cache on the bytes of the file that defines
 it. A compiled function holds the machine code of the compiled functions it calls, so when a
@@ -68,7 +68,8 @@ def _root_of(py_file: str) -> Path | None:
 
 
 def _impl_class(caching: Any) -> Any:
-    """numba's cache implementation class (``CacheImpl`` since 0.60-ish, ``_CacheImpl`` before)."""
+    """numba's cache implementation class (``CacheImpl`` in numba 0.68, ``_CacheImpl`` in
+    some older releases)."""
     impl = getattr(caching, "CacheImpl", None)
     return impl if impl is not None else caching._CacheImpl
 

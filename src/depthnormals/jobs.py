@@ -602,12 +602,13 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
             counts["planned"] += 1
             if not trusted and not fresh:
                 planned.add(job.output)
-            key = keys[job.output] = _input_key(job)
+            key = _input_key(job)
             if (resume and trusted and job.output.is_file() and not _changed_since(job)
                     and recorded.get(job.output.relative_to(root).as_posix()) == key):
                 counts["skipped"] += 1
                 bar.update(f"{job.label} (done before)")
                 continue
+            keys[job.output] = key  # logged once the output is written (on_done)
             if fresh and counts["planned"] - counts["skipped"] == 1:  # the first frame to compute
                 out.mkdir(parents=True, exist_ok=True)
                 _write_manifest(out, wanted)

@@ -227,7 +227,8 @@ def grid_quantum(steps: np.ndarray, raw: np.ndarray) -> float:
     in footprints: ``q f / z`` (upper median over the samples), ``q`` the least non-zero
     neighbour difference, where at least :data:`GRID_SHARE` of the differences ``raw`` (depth
     units; ``steps`` the same in footprints) are within :data:`GRID_TOL` of a multiple of
-    ``q``; else 0 (float renders, noisy depth: ~10 % are)."""
+    ``q``, and the quantum is at least :data:`GRID_FLOOR`; else 0 (float renders, noisy
+    depth: ~10 % are)."""
     n = raw.size
     q = float(raw.min()) if n else 0.0
     if n < GRID_MIN or not q > 0.0:
@@ -308,10 +309,12 @@ class NoiseSamples:
     """The samples of one pass over prepared depth (:func:`noise_pass`): the image's level
     now (``sigma``), every tile's on demand (:meth:`tiles`).
 
-    ``iid``: the second-difference level (footprints); ``quant_share``, ``quant_step``: the
-    plateau search (:func:`quantisation_step`); ``quant``: the rounding noise
-    ``quant_step / sqrt(12)``; ``sigma``: ``sqrt(iid^2 + quant^2)``, the level every branch
-    reads."""
+    ``iid``: the second-difference level (footprints); ``quant_share``: the plateau search's
+    share of equal neighbours (:func:`quantisation_step`); ``grid``: the depth grid's quantum
+    (0: none); ``quant_step``: the step whose rounding noise counts (:func:`quant_step_of`:
+    the plateaus', else the grid's, else 0) and ``plateaus`` whether it is the plateaus';
+    ``quant``: the rounding noise ``quant_step / sqrt(12)``; ``sigma``:
+    ``sqrt(iid^2 + quant^2)``, the level every branch reads."""
 
     def __init__(self, every: np.ndarray, starts: np.ndarray, shape: tuple[int, int],
                  quant: tuple[float, float, float] = (float("nan"), 0.0, 0.0)):
