@@ -167,3 +167,16 @@ def test_a_front_end_edit_keeps_the_kernels_cached(tmp_path):
         edit(rel)
         assert digest() != before
         before = digest()
+
+
+def test_an_unreadable_module_does_not_stop_the_import(tmp_path):
+    """The digest is taken when the first kernel is defined, i.e. at ``import depthnormals``:
+    a module it cannot read (a broken link left by an interrupted upgrade) is counted by name,
+    not raised."""
+    from depthnormals._numba_cache import compiled_code_digest
+
+    (tmp_path / "a.py").write_text("import numba\n@numba.njit(cache=True)\ndef f(): return 1\n")
+    (tmp_path / "gone.py").symlink_to(tmp_path / "missing.py")
+    first = compiled_code_digest.__wrapped__(tmp_path)
+    (tmp_path / "gone.py").unlink()
+    assert compiled_code_digest.__wrapped__(tmp_path) != first

@@ -50,7 +50,10 @@ def compiled_code_digest(root: Path, dependencies: tuple[str, ...] = ()) -> str:
     h = hashlib.blake2b(digest_size=12)
     for path in sorted(root.rglob("*.py")):
         rel = path.relative_to(root).as_posix()
-        data = path.read_bytes()
+        try:
+            data = path.read_bytes()
+        except OSError:  # unreadable (a broken link): counted by name, never an import error
+            data = b"jit: unreadable"
         if b"jit" in data or rel in extra:
             h.update(rel.encode() + b"\0" + data + b"\0")
     return h.hexdigest()
