@@ -31,7 +31,10 @@ def code_fingerprint() -> str:
     for path in sorted(PACKAGE_ROOT.rglob("*.py")):
         h.update(path.relative_to(PACKAGE_ROOT).as_posix().encode())
         h.update(b"\0")
-        h.update(path.read_bytes())
+        try:
+            h.update(path.read_bytes())
+        except OSError:  # unreadable (a broken link): counted by name
+            h.update(b"unreadable")
         h.update(b"\0")
     return h.hexdigest()
 
