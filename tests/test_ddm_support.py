@@ -146,7 +146,9 @@ def test_the_default_on_millimetre_depth_takes_the_box_fit_and_maps_its_error(q_
     on this scene's i.i.d. noise)."""
     r = _room()
     d = _on_grid(r.depth, q_mm * 1e-3)
-    assert dn.noise_profile(d, r.K).branch == "box-fit"
+    profile = dn.noise_profile(d, r.K)
+    assert profile.branch == "box-fit" and profile.grid == profile.quant_step > 0.0
+    assert dn.noise_profile(r.depth, r.K).grid == 0.0
     n, u = dn.estimate_normals(d, r.K, return_uncertainty=True)
     e = dn.angular_error(n, r.normals)
     planes = dn.estimate_normals(d, r.K, selection="planes")

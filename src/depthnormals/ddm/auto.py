@@ -325,9 +325,14 @@ class NoiseProfile:
         From second differences of inverse depth (MAD rule): independent per-pixel noise.
         Exactly 0 on quantised depth whose plateaus cover most pixels.
     quantisation : float
-        Rounding noise ``step / sqrt(12)`` of quantised depth (disparity plateaus), 0 when
-        the depth is not quantised; ``quant_step`` the step (footprints), ``quant_share`` the
-        share of exactly equal neighbours on sloped surfaces (quantised from 0.3).
+        Rounding noise ``step / sqrt(12)`` of quantised depth, 0 when the depth is not
+        quantised; ``quant_step`` the step (footprints): the disparity plateaus' where
+        ``quant_share``, the share of exactly equal neighbours on sloped surfaces, is at least
+        0.3, else the depth grid's quantum ``grid`` where its rounding noise is not small
+        beside ``iid`` (:func:`depthnormals.ddm.noise.quant_step_of`).
+    grid : float
+        The quantum (footprints) of depth stored on a grid (millimetre PNGs), 0 when the depth
+        lies on none (:func:`depthnormals.ddm.noise.grid_quantum`).
     radii, residual : tuple
         Plane residual standard deviation (footprints) of windows of these radii (median of
         the better half of the sampled windows): flat with radius for independent noise,
@@ -365,6 +370,7 @@ class NoiseProfile:
     radius: int
     depth_exponent: float
     tiles: np.ndarray
+    grid: float = 0.0
 
 
 def noise_profile(depth: Any, K: Any, *, depth_scale: float | None = None) -> NoiseProfile:
@@ -416,4 +422,4 @@ def noise_profile(depth: Any, K: Any, *, depth_scale: float | None = None) -> No
         quant_share=p.quant_share, radii=prof.radii,
         residual=tuple(math.sqrt(x) for x in prof.residual), fit_error=prof.error,
         excess=prof.excess(), branch=branch, radius=prof.radius,
-        depth_exponent=prof.exponent, tiles=p.tiles())
+        depth_exponent=prof.exponent, tiles=p.tiles(), grid=p.grid)
