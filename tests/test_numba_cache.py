@@ -13,6 +13,8 @@ from pathlib import Path
 
 import pytest
 
+from depthnormals._fingerprint import PACKAGE_ROOT
+
 CALLER = """
 import numba as nb
 from .b import g
@@ -69,7 +71,7 @@ def test_every_cached_kernel_of_the_package_is_stamped_with_the_package_digest()
     import numba
 
     import depthnormals  # noqa: F401  (installs the locator first)
-    from depthnormals._numba_cache import DEPENDENCIES, PACKAGE_ROOT, compiled_code_digest
+    from depthnormals._numba_cache import DEPENDENCIES, compiled_code_digest
     from depthnormals.ddm import boxfit, support
     from depthnormals.kernels import stencils, threefn_rows
 
@@ -87,19 +89,12 @@ def test_every_cached_kernel_of_the_package_is_stamped_with_the_package_digest()
 
 
 def _module_names() -> dict[str, Path]:
-    root = Path(depthnormals_root())
+    """Every module of the package by dotted name."""
     names = {}
-    for path in root.rglob("*.py"):
-        rel = path.relative_to(root.parent).with_suffix("")
-        name = ".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
-        names[name] = path
+    for path in PACKAGE_ROOT.rglob("*.py"):
+        rel = path.relative_to(PACKAGE_ROOT.parent).with_suffix("")
+        names[".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)] = path
     return names
-
-
-def depthnormals_root() -> Path:
-    from depthnormals._fingerprint import PACKAGE_ROOT
-
-    return PACKAGE_ROOT
 
 
 def _package_imports(name: str, path: Path, names: dict[str, Path]) -> set[str]:
@@ -126,7 +121,7 @@ def test_the_digest_covers_every_module_compiled_code_can_read():
     from depthnormals._numba_cache import DEPENDENCIES
 
     names = _module_names()
-    root = depthnormals_root()
+    root = PACKAGE_ROOT
     text = {n: p.read_bytes() for n, p in names.items()}
     covered = {n for n in names if b"jit" in text[n]
                or names[n].relative_to(root).as_posix() in DEPENDENCIES}
@@ -151,7 +146,7 @@ def test_a_front_end_edit_keeps_the_kernels_cached(tmp_path):
     from depthnormals._numba_cache import DEPENDENCIES, compiled_code_digest
 
     pkg = tmp_path / "depthnormals"
-    shutil.copytree(depthnormals_root(), pkg, ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(PACKAGE_ROOT, pkg, ignore=shutil.ignore_patterns("__pycache__"))
 
     def digest():
         return compiled_code_digest.__wrapped__(pkg, DEPENDENCIES)
