@@ -17,7 +17,6 @@ from typing import Any, TypeVar
 import numpy as np
 
 from ._parallel import _pool, thread_limit, threads_here
-from ._validate import unmasked
 from .camera import Intrinsics, as_intrinsics
 
 __all__ = ["estimate_normals_batch", "frame_intrinsics", "map_threads"]
@@ -170,8 +169,7 @@ def estimate_normals_batch(estimate: Callable[..., Any], depth: Any, K: Any, *, 
     whether a 3-D depth is a stack, one single-channel image ``(H, W, 1)`` or a colour image
     (its ``stack`` argument).
     """
-    depth = unmasked(depth)
-    arr = depth if isinstance(depth, np.ndarray) else np.asarray(depth)
+    arr = depth if isinstance(depth, np.ndarray) else np.asarray(depth)  # (a masked stack stays one)
     if arr.ndim != 3:
         raise ValueError(f"a batch of depth frames must have shape (N, H, W); got shape {arr.shape}")
     if arr.shape[0] == 0:

@@ -404,10 +404,12 @@ def _read_inputs_log(out: Path) -> dict[str, str]:
     """The inputs log of ``out``: output (relative, posix) -> input key, the last line of each
     output winning; a line cut short by a killed run is ignored."""
     path = out / INPUTS_LOG
-    if not path.is_file():
-        return {}
+    return _parse_inputs_log(path.read_text(errors="replace").splitlines()) if path.is_file() else {}
+
+
+def _parse_inputs_log(lines: list[str]) -> dict[str, str]:
     found: dict[str, str] = {}
-    for line in path.read_text(errors="replace").splitlines():
+    for line in lines:
         try:
             entry = json.loads(line)
             found[str(entry["output"])] = str(entry["input"])
@@ -443,7 +445,7 @@ def _compact_inputs_log(out: Path) -> None:
     if not path.is_file():
         return
     lines = path.read_text(errors="replace").splitlines()
-    found = {rel: key for rel, key in _read_inputs_log(out).items() if (out / rel).is_file()}
+    found = {rel: key for rel, key in _parse_inputs_log(lines).items() if (out / rel).is_file()}
     if len(found) != len(lines):
         write_bytes_atomic(path, "".join(_log_line(r, k) for r, k in sorted(found.items())).encode())
 

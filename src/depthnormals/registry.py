@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from . import ddm
-from ._validate import NoValidNormalWarning, check_depth, no_valid_normal_message, unmasked
+from ._validate import NoValidNormalWarning, check_depth, no_valid_normal_message
 from .ddm.threefn_plus import fused_plus as _fused_3f2n_plus
 from .ddm.uncertainty import normals_with_uncertainty
 from .estimators import (
@@ -313,7 +313,7 @@ def compute_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
     if not isinstance(method, str):
         raise TypeError(f"method must be a string; got {type(method).__name__}")
     if np.ndim(depth) == 3 and np.shape(depth)[-1] == 1:  # a single-channel image (H, W, 1)
-        depth = unmasked(depth)
+        # sliced, not converted: a masked array keeps its mask for check_depth
         depth = (depth if isinstance(depth, np.ndarray) else np.asarray(depth))[..., 0]
     if method.endswith("+") and method[:-1] in _REGISTRY:
         base = method[:-1]

@@ -233,9 +233,9 @@ def grid_quantum(steps: np.ndarray, raw: np.ndarray) -> float:
     q = float(raw.min()) if n else 0.0
     if n < GRID_MIN or not q > 0.0:
         return 0.0
-    on = int(np.count_nonzero(np.abs(raw / q - np.round(raw / q)) < GRID_TOL))
-    per = steps * (q / raw)
-    return grid_from_counts(n, q, on, lambda: float(np.partition(per, n // 2)[n // 2]))
+    r = raw / q
+    on = int(np.count_nonzero(np.abs(r - np.round(r)) < GRID_TOL))
+    return grid_from_counts(n, q, on, lambda: float(np.partition(steps * (q / raw), n // 2)[n // 2]))
 
 
 def grid_from_counts(n: int, q: float, on: int, quantum_median) -> float:
