@@ -181,6 +181,71 @@ def test_excess_tells_independent_from_correlated_noise(window):
         assert e_new < 0.5 * e_old
 
 
+def _local_tables(levels, share_far, far_factor, n=60, edges=0):
+    """Pair tables for :func:`support.local_excess`: ``n`` pairs per radius, a share
+    ``share_far`` of them in tile 1 and the rest in tile 0, each with the angle whose
+    Rayleigh error is its tile's prediction (``far_factor`` times it in tile 1) and a residual
+    of its tile's level squared; ``edges`` pairs more in tile 0 with a residual 50 times it
+    and an angle of 60 deg (pairs across an edge)."""
+    tables = []
+    for r in support.RADII:
+        rows = []
+        for i in range(n + edges):
+            t = 1 if i < share_far * n else 0
+            lev = levels.ravel()[t]
+            pred = support.predicted_error(lev, r, support.sample_every(r))
+            ang = pred / support.PAIR_TO_ERROR * (far_factor if t == 1 else 1.0)
+            res = lev * lev
+            if i >= n:
+                ang, res, t = 60.0, 50.0 * levels.ravel()[0] ** 2, 0
+            rows.append((ang, res, 2.0, float(t)))
+        rows = np.array(rows)
+        tables.append((rows, np.ones(len(rows), dtype=bool)))
+    return tables
+
+
+def test_local_excess_reads_each_pair_against_its_own_tile():
+    """Noise that the fits read 3x its second-difference level in the far tiles: each pair
+    against its own tile reads 3 where the far pairs are the majority and 1 where they are
+    not (the median), whatever the tiles' levels; a pair across an edge (residual 50x) is not
+    read; a NaN tile reads as the frame's level; too few pairs give NaN."""
+    levels = np.array([[0.5, 2.0]])
+    assert support.local_excess(_local_tables(levels, 0.7, 3.0), levels, 1.0) == pytest.approx(3.0)
+    assert support.local_excess(_local_tables(levels, 0.3, 3.0), levels, 1.0) == pytest.approx(1.0)
+    assert support.local_excess(_local_tables(levels, 0.7, 3.0, edges=8), levels, 1.0) == pytest.approx(3.0)
+    # the far tile's level unknown: the frame's (2.0) takes its place
+    nan_far = np.array([[0.5, np.nan]])
+    assert support.local_excess(_local_tables(levels, 0.7, 3.0), nan_far, 2.0) == pytest.approx(3.0)
+    assert math.isnan(support.local_excess(_local_tables(levels, 0.7, 3.0, n=11), levels, 1.0))
+
+
+def test_active_stereo_noise_growing_with_depth_takes_the_measured_support():
+    """A room seen by the realsense_d4xx model at 0.4-1.8 m: its noise, correlated over the
+    matching window, grows as z^2; second differences read the far tiles 4x low and the
+    image-wide excess (the median pair against the median tile) stays under 2, so the box-fit
+    ran and erred 15 deg (git e0e0173). Read pair by pair against each pair's own tile the
+    excess is 5: the measured support, 3.4 deg. Independent noise growing with depth as much
+    stays on the box-fit."""
+    from depthnormals.synth.noise import realsense_d4xx_noise
+
+    r = make_scene("demo-room").render(K=K, shape=(480, 640))
+    d0 = np.where(r.depth > 0, 0.3 * r.depth, 0.0)
+    d = realsense_d4xx_noise(d0, r.normals, r.K, rng=np.random.default_rng(1))
+    p = dn.noise_profile(d, r.K)
+    assert p.excess <= auto.EXCESS < p.local_excess
+    assert p.branch == "measured-support"
+    z, cam = prepare(d, r.K, None)
+    box = auto.box_select(z, None, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma, levels=p.tiles)
+    e = np.nanmean(dn.angular_error(dn.estimate_normals(d, r.K), r.normals))
+    assert e < 0.3 * np.nanmean(dn.angular_error(box, r.normals))
+    zmed = np.median(r.depth[r.depth > 0])
+    rng = np.random.default_rng(2)
+    level = 3.0 * r.depth / zmed  # footprints, growing with depth
+    iid = np.where(r.depth > 0, r.depth * (1 + level * rng.normal(size=r.depth.shape) / r.K.fx), 0)
+    q = dn.noise_profile(iid, r.K)
+    assert q.local_excess < 1.5 and q.branch == "box-fit"
+
+
 def test_predicted_error_matches_independent_noise():
     # a plane with i.i.d. noise of 0.5 footprints: the pairs' measured error is the prediction
     r = _plane(normal=(0.0, 0.0, -1.0))
@@ -316,21 +381,29 @@ def test_batched_profile_statistics_equal_the_per_frame_ones():
     for k, _ in enumerate(RADII):
         rows = np.stack([np.round(rng.gamma(2.0, 3.0 / (k + 1), (b, p)), 2),
                          np.round(rng.gamma(2.0, 0.5 * (k + 1), (b, p)), 3),
-                         rng.uniform(1.0, 4.0, (b, p))], axis=-1)
+                         rng.uniform(1.0, 4.0, (b, p)),
+                         rng.integers(0, 4, (b, p)).astype(np.float64)], axis=-1)
         ok = rng.random((b, p)) < 0.7
         ok[1, : p - 9 - k] = False  # frame 1: fewer than 12 pairs from some radius on
         ok[2] = False  # frame 2: none at all
         tables.append((rows, ok))
     sigmas = [0.3, 1.2, float("nan"), 0.0, 2.0, 0.05]
-    batch = profiles_from_pair_tables(tables, sigmas)
-    for f, sigma in enumerate(sigmas):
-        single = profile_from_pairs({r: rows[f][ok[f]] for r, (rows, ok) in zip(RADII, tables, strict=True)}
-                                    .__getitem__, sigma)
-        assert repr(batch[f]) == repr(single), f
+    # tile levels (2 x 2 tiles) per frame, a NaN tile among them (read as the frame's level)
+    tiles = rng.uniform(0.02, 1.5, (b, 2, 2))
+    tiles[4, 0, 1] = np.nan
+    for lev in (None, tiles):
+        batch = profiles_from_pair_tables(tables, sigmas, tiles=lev)
+        for f, sigma in enumerate(sigmas):
+            by_radius = {r: rows[f][ok[f]] for r, (rows, ok) in zip(RADII, tables, strict=True)}
+            single = profile_from_pairs(by_radius.__getitem__, sigma,
+                                        tiles=None if lev is None else lev[f])
+            assert repr(batch[f]) == repr(single), f
     assert batch[2].radii == (1,) and len(batch[1].radii) < len(RADII)
-    empty = [(np.zeros((2, 0, 3)), np.zeros((2, 0), dtype=bool)) for _ in RADII]  # no pair
-    assert [repr(q) for q in profiles_from_pair_tables(empty, [0.1, 0.2])] == \
-        [repr(profile_from_pairs(lambda r: np.zeros((0, 3)), s)) for s in (0.1, 0.2)]
+    assert sum(np.isfinite(q.local) for q in batch) >= 2  # the local excess was read
+    empty = [(np.zeros((2, 0, 4)), np.zeros((2, 0), dtype=bool)) for _ in RADII]  # no pair
+    pairs = [(0.1, tiles[0]), (0.2, tiles[1])]
+    assert [repr(q) for q in profiles_from_pair_tables(empty, [0.1, 0.2], tiles=tiles[:2])] == \
+        [repr(profile_from_pairs(lambda r: np.zeros((0, 4)), s, tiles=t)) for s, t in pairs]
 
 
 def _medians_ref(x, ok):

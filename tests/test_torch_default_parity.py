@@ -119,6 +119,19 @@ def test_real_frames(shared_data):
         _check([f.depth.astype(np.float64) for f in group], [f.K for f in group], f"real {shape}")
 
 
+def test_the_local_excess_branch():
+    """A frame whose image-wide excess reads independent noise and whose pair-by-pair excess
+    does not (active stereo growing with depth, tests/test_ddm_support.py): both libraries
+    take the measured support, each from its own pairs against its own tiles."""
+    K = (525.0, 525.0, 319.5, 239.5)
+    r = make_scene("demo-room").render(K=K, shape=(480, 640))
+    d0 = np.where(r.depth > 0, 0.3 * r.depth, 0.0)
+    z = np.asarray(sensor.realsense_d4xx_noise(d0, r.normals, K, rng=np.random.default_rng(1)))
+    p = dn.noise_profile(z, K)
+    assert p.excess <= 2.0 < p.local_excess and p.branch == "measured-support"
+    _check([z], [K], "local excess")
+
+
 def test_the_paper_options_take_the_noisy_branch_on_noisy_depth(rough_sphere):
     """With the CRF the clean branch is the curvature selection below 0.03 footprints, the
     box-fit above (ddm.auto._branch); both libraries agree on the noisy frame."""

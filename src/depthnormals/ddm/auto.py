@@ -202,8 +202,12 @@ def needs_measured_support(noise: NoiseSamples, prof: SupportProfile) -> bool:
     exceeds its second-difference level (quantised depth) or the measured fit errors exceed
     what its level predicts for independent noise by more than :data:`EXCESS`
     (:meth:`SupportProfile.excess`); False (the tuned box-fit) for independent noise. The one
-    rule of :func:`noisy_select`, :func:`noise_profile` and the uncertainty map."""
-    return (noise.plateaus and noise.quant > noise.iid) or not prof.excess() <= EXCESS  # NaN: measured
+    rule of :func:`noisy_select`, :func:`noise_profile` and the uncertainty map. ``prof``
+    measured with the tiles' levels reads the excess pair by pair too, each pair against its
+    own tile (:func:`depthnormals.ddm.support.local_excess`): over :data:`EXCESS` there
+    counts as well."""
+    return ((noise.plateaus and noise.quant > noise.iid) or not prof.excess() <= EXCESS  # NaN: measured
+            or prof.local > EXCESS)  # NaN (not read): not measured
 
 
 def noisy_select(z: np.ndarray, base: np.ndarray | None, fx: float, fy: float, cx: float,
@@ -219,10 +223,10 @@ def noisy_select(z: np.ndarray, base: np.ndarray | None, fx: float, fy: float, c
     the fit's error (:data:`KEEP_CHI2`; for the measured support the per-axis variance of
     the slope is ``(e / sqrt(pi / 2) / fx)^2``, ``e`` the measured mean angular error)."""
     sigma = noise.sigma
-    prof = support_profile(z, fx, fy, cx, cy, sigma)
+    levels = noise.tiles()
+    prof = support_profile(z, fx, fy, cx, cy, sigma, tiles=levels)
     if not needs_measured_support(noise, prof):
-        return box_select(z, base, fx, fy, cx, cy, sigma, keep_chi2=keep_chi2,
-                          levels=noise.tiles())
+        return box_select(z, base, fx, fy, cx, cy, sigma, keep_chi2=keep_chi2, levels=levels)
     out = support_select(z, fx, fy, cx, cy, sigma, profile=prof)
     if base is not None:
         k2 = KEEP_CHI2 if keep_chi2 is None else float(keep_chi2)
@@ -343,6 +347,11 @@ class NoiseProfile:
     excess : float
         How far the measured fit errors exceed those ``sigma`` predicts for independent noise
         (about 1 for independent noise, 2-9 on correlated sensor depth).
+    local_excess : float
+        The same read pair by pair, each sampled window pair against its own 64 x 64 tile's
+        level (windows up to 9 x 9; about 1 for independent noise, 3-6 on the real frames,
+        2.5-10 where active stereo's noise grows with depth and the image-wide ``excess``
+        reads it low; NaN: too few pairs). Over 2 the branch is the measured support too.
     branch : str
         What ``selection="auto"`` runs on it: ``"planes"`` (clean), ``"box-fit"`` (independent
         noise: the radius predicted from ``sigma``), ``"measured-support"`` (quantised or
@@ -371,6 +380,7 @@ class NoiseProfile:
     depth_exponent: float
     tiles: np.ndarray
     grid: float = 0.0
+    local_excess: float = float("nan")
 
 
 def noise_profile(depth: Any, K: Any, *, depth_scale: float | None = None) -> NoiseProfile:
@@ -412,7 +422,8 @@ def noise_profile(depth: Any, K: Any, *, depth_scale: float | None = None) -> No
 
     z, cam = prepare(depth, K, depth_scale)
     p = noise_pass(z, cam.fx, cam.fy, tile=TILE)
-    prof = support_profile(z, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma)
+    tiles = p.tiles()
+    prof = support_profile(z, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma, tiles=tiles)
     if not p.sigma >= PLANES_NOISE:
         branch = "planes"
     else:
@@ -422,4 +433,4 @@ def noise_profile(depth: Any, K: Any, *, depth_scale: float | None = None) -> No
         quant_share=p.quant_share, radii=prof.radii,
         residual=tuple(math.sqrt(x) for x in prof.residual), fit_error=prof.error,
         excess=prof.excess(), branch=branch, radius=prof.radius,
-        depth_exponent=prof.exponent, tiles=p.tiles(), grid=p.grid)
+        depth_exponent=prof.exponent, tiles=tiles, grid=p.grid, local_excess=prof.local)

@@ -50,18 +50,19 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba as nb
 import numpy as np
 
 from .._parallel import run_rows
 from .boxfit import SHIFTS, box_fit_windows, solve_window
+from .noise import TILE
 
-__all__ = ["BIG_FACTOR", "EXCESS_FLOOR", "GATE", "MAX_RADIUS", "PAIR_TO_ERROR", "RADII",
-           "TARGET_ERROR", "SupportProfile", "choice_inputs", "choose_pixel", "depth_exponent",
-           "predicted_error", "profile_from_pairs", "profiles_from_pair_tables", "sample_every",
-           "sample_step",
+__all__ = ["BIG_FACTOR", "EXCESS_FLOOR", "GATE", "LOCAL_KEEP", "LOCAL_MAX_RADIUS", "MAX_RADIUS",
+           "PAIR_TO_ERROR", "RADII", "TARGET_ERROR", "SupportProfile", "choice_inputs",
+           "choose_pixel", "depth_exponent", "local_excess", "predicted_error",
+           "profile_from_pairs", "profiles_from_pair_tables", "sample_every", "sample_step",
            "support_profile", "support_select"]
 
 #: Candidate window radii (windows of 3x3 to 33x33 pixels).
@@ -116,6 +117,16 @@ SAMPLES = 100
 #: independent noise the error read is up to 2x the full window's, but there the smaller,
 #: fully read radii reach the target first.
 SPARSE_RADIUS = 6
+#: :func:`local_excess` reads the radii from 2 up to this one (windows up to 9x9): larger
+#: windows span the scene's own structure (shelves, an auditorium's tiers), which the pairs'
+#: angles then read as noise.
+LOCAL_MAX_RADIUS = 4
+#: :func:`local_excess` keeps the pairs whose residual variance, in units of their tile's
+#: noise variance, is within this many times the median one (a pair across an edge or a
+#: crease is far beyond; correlated noise reads 1-6 times its second-difference level, and
+#: keeping only the better half, as :meth:`SupportProfile.excess` does, drops it where it is
+#: strongest).
+LOCAL_KEEP = 4.0
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -173,8 +184,10 @@ def _fit(z, v, u, r, fx, fy, cx, cy, every):
 def _pairs(z, r, fx, fy, cx, cy, step, every, out):
     """Adjacent-window pairs of radius ``r`` on a grid of spacing ``step``: each row of
     ``out`` gets (angle between the two normals in degrees, the larger residual variance,
-    the depth at the first window's centre); returns the number of rows written."""
+    the depth at the first window's centre, the index of the noise pass's tile holding that
+    centre, rows of tiles first); returns the number of rows written."""
     h, w = z.shape
+    tw = (w + TILE - 1) // TILE
     d = 2 * r + 1
     k = 0
     for v in range(r, h - r, step):
@@ -196,6 +209,7 @@ def _pairs(z, r, fx, fy, cx, cy, step, every, out):
                 out[k, 0] = math.degrees(math.acos(dot))
                 out[k, 1] = max(s0, s1)
                 out[k, 2] = z[v, u]
+                out[k, 3] = (v // TILE) * tw + u // TILE
                 k += 1
     return k
 
@@ -224,7 +238,10 @@ class SupportProfile:
     measured), the mean angular error of a fitted normal (``error``, degrees, the larger of
     the measured and the predicted one) and the median plane residual variance
     (``residual``, footprints^2); the chosen ``radius``; how the plane residual grows with
-    depth at that radius, ``residual ~ (z / depth) ** exponent`` (:func:`depth_exponent`)."""
+    depth at that radius, ``residual ~ (z / depth) ** exponent`` (:func:`depth_exponent`);
+    ``local``, the excess read pair by pair against the noise level of each pair's own tile
+    (:func:`local_excess`; NaN where the tiles' levels were not given or too few pairs
+    count)."""
 
     radii: tuple[int, ...]
     error: tuple[float, ...]
@@ -234,6 +251,7 @@ class SupportProfile:
     exponent: float = 0.0
     measured: tuple[float, ...] = ()
     predicted: tuple[float, ...] = ()
+    local: float = float("nan")
 
     def excess(self) -> float:
         """How far the measured fit errors exceed those the noise level predicts for
@@ -281,52 +299,112 @@ def sample_every(r: int) -> int:
 
 
 def support_profile(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
-                    sigma: float, *, target: float = TARGET_ERROR) -> SupportProfile:
+                    sigma: float, *, target: float = TARGET_ERROR,
+                    tiles: np.ndarray | None = None) -> SupportProfile:
     """Measure the fitted normal's error per radius on prepared depth ``z`` (module doc) and
     choose the radius; ``sigma`` is the noise level (footprints, :func:`estimate_noise`).
     Radii are measured smallest first and the search stops at the first that reaches
-    ``target``."""
+    ``target``. ``tiles``: the noise pass's tile levels
+    (:meth:`depthnormals.ddm.noise.NoiseSamples.tiles`), for the profile's ``local`` excess
+    (NaN without them)."""
     h, w = z.shape
 
     def pairs(r: int) -> np.ndarray:
         step = sample_step(h, w, r)
-        out = np.empty((2 * (h // step + 1) * (w // step + 1), 3))
+        out = np.empty((2 * (h // step + 1) * (w // step + 1), 4))
         k = _pairs(z, r, float(fx), float(fy), float(cx), float(cy), step, sample_every(r), out)
         return out[:k]
 
-    return profile_from_pairs(pairs, sigma, target=target)
+    return profile_from_pairs(pairs, sigma, target=target, tiles=tiles)
 
 
-def profile_from_pairs(pairs, sigma: float, *, target: float = TARGET_ERROR) -> SupportProfile:
+def profile_from_pairs(pairs, sigma: float, *, target: float = TARGET_ERROR,
+                       tiles: np.ndarray | None = None) -> SupportProfile:
     """The statistics of :func:`support_profile` from the adjacent-window pairs:
     ``pairs(r)`` gives, for a radius of :data:`RADII`, the rows (angle between the two
     normals in degrees, the larger residual variance, the depth at the first window's
-    centre), in any order; it is asked for radii smallest first, and no further than the
-    search goes."""
+    centre, the index of its tile), in any order; it is asked for radii smallest first, and
+    no further than the search goes. ``tiles``: the tiles' levels, for ``local``."""
+    read: list[np.ndarray] = []
 
     def stats(k: int) -> tuple:
         out = pairs(RADII[k])
+        read.append(out)
         n, measured, resid, keep = _radius_stats(out[None], np.ones((1, out.shape[0]), dtype=bool))
         return n[0], measured[0], resid[0], out[keep[0]]
 
-    return _choose_profile(stats, sigma, target)
+    prof = _choose_profile(stats, sigma, target)
+    if tiles is None:
+        return prof
+    tables = [(rows, np.ones(rows.shape[0], dtype=bool)) for rows in read[:len(prof.radii)]]
+    return replace(prof, local=local_excess(tables, tiles, sigma))
 
 
 def profiles_from_pair_tables(tables: list[tuple[np.ndarray, np.ndarray]],
                               sigmas: list[float], *,
-                              target: float = TARGET_ERROR) -> list[SupportProfile]:
-    """:func:`profile_from_pairs` for a batch of frames at once: ``tables[k] = (rows (B, P, 3),
+                              target: float = TARGET_ERROR,
+                              tiles: np.ndarray | None = None) -> list[SupportProfile]:
+    """:func:`profile_from_pairs` for a batch of frames at once: ``tables[k] = (rows (B, P, 4),
     ok (B, P))`` the pairs of radius ``RADII[k]`` of every frame (rows where ``ok``), ``sigmas``
-    the frames' noise levels. The medians of every frame and radius are computed together,
-    the choices frame by frame: the same profiles as one call of :func:`profile_from_pairs`
-    per frame (tested); the torch port computes the pairs on the device and hands them here,
-    so both libraries take the same decisions."""
+    the frames' noise levels, ``tiles`` their tile levels (B, TY, TX). The medians of every
+    frame and radius are computed together, the choices frame by frame: the same profiles as
+    one call of :func:`profile_from_pairs` per frame (tested); the torch port computes the
+    pairs on the device and hands them here, so both libraries take the same decisions."""
     per = [_radius_stats(rows, ok) for rows, ok in tables]
 
     def frame(f: int):
         return lambda k: (per[k][0][f], per[k][1][f], per[k][2][f], tables[k][0][f][per[k][3][f]])
 
-    return [_choose_profile(frame(f), sigma, target) for f, sigma in enumerate(sigmas)]
+    out = [_choose_profile(frame(f), sigma, target) for f, sigma in enumerate(sigmas)]
+    if tiles is None:
+        return out
+    return [replace(p, local=local_excess([(rows[f], ok[f]) for rows, ok in tables[:len(p.radii)]],
+                                          tiles[f], sigmas[f]))
+            for f, p in enumerate(out)]
+
+
+def local_excess(tables: list[tuple[np.ndarray, np.ndarray]], tiles: np.ndarray,
+                 sigma: float) -> float:
+    """:meth:`SupportProfile.excess` read pair by pair against the noise of each pair's own
+    tile: per measured radius from 2 to :data:`LOCAL_MAX_RADIUS` (``tables[k] = (rows (P, 4),
+    ok (P,))`` the pairs of ``RADII[k]``, :func:`_pairs`), the pairs whose residual variance
+    in units of their tile's level squared (``tiles``, NaN: ``sigma``) is within
+    :data:`LOCAL_KEEP` times the median one and whose predicted error (:func:`predicted_error`
+    at their tile's level) is at least :data:`EXCESS_FLOOR` degrees;
+    :data:`PAIR_TO_ERROR` times the median of their angle over that prediction; the largest
+    over the radii with :data:`MIN_PAIRS` such pairs, NaN where none has.
+
+    Why: the image-wide excess compares the median pair with the median tile. Where the
+    noise grows steeply with depth (active stereo: ``sigma_z ~ z^2``, correlated over the
+    matching window, so that second differences read it several times low in the far tiles)
+    the far pairs have the largest residuals and drop out, and the far tiles' levels count
+    once each: on a room seen by the realsense_d4xx model the image-wide excess reads 0.7-1.9
+    while the box-fit errs 12-27 deg where the measured support errs 2.5-7 (docs/3f2n-plus.md,
+    "Correlated noise the image-wide excess misses"). Each pair read against its own tile's
+    level reads 2.5-10 there, at most 1.6 for the tof model and 1 for independent noise."""
+    lev = np.asarray(tiles, dtype=np.float64).ravel()
+    lev = np.where(np.isfinite(lev), lev, sigma)
+    best = float("nan")
+    last = RADII.index(LOCAL_MAX_RADIUS)
+    for k in range(1, min(len(tables), last + 1)):
+        rows, ok = tables[k]
+        rows = rows[ok]
+        if rows.shape[0] < MIN_PAIRS:
+            continue
+        r = RADII[k]
+        s = lev[rows[:, 3].astype(np.int64)]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            res = rows[:, 1] / (s * s)
+            pred = np.degrees(math.sqrt(math.pi / 2.0) * s / math.sqrt(_window_suu(r, sample_every(r))))
+            fin = np.isfinite(res)
+            if not fin.any():
+                continue
+            keep = fin & (res <= LOCAL_KEEP * np.median(res[fin])) & (pred >= EXCESS_FLOOR)
+            if np.count_nonzero(keep) < MIN_PAIRS:
+                continue
+            ratio = PAIR_TO_ERROR * float(np.median(rows[keep, 0] / pred[keep]))
+        best = ratio if not best >= ratio else best
+    return best
 
 
 def _radius_stats(rows: np.ndarray, ok: np.ndarray) -> tuple:

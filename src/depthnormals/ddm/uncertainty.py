@@ -1555,9 +1555,10 @@ def _plus(depth, K, depth_scale, options):
         sigma = p.sigma if p is not None else float("nan")
         return _clean_branch(z, c, sigma)
     sigma = p.sigma
-    prof = support_profile(z, *c, sigma)
+    tiles = p.tiles()
+    prof = support_profile(z, *c, sigma, tiles=tiles)
     if not needs_measured_support(p, prof):
-        return _box_branch(z, c, sigma, p.tiles(), prof)
+        return _box_branch(z, c, sigma, tiles, prof)
     return _support_branch(z, c, sigma, prof)
 
 

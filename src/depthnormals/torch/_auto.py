@@ -130,7 +130,7 @@ def noisy_select(z64: torch.Tensor, valid: torch.Tensor, cam64, noise: BatchNois
     idx_all = torch.tensor(frames, device=dev)
     zsub, vsub = z64[idx_all], valid[idx_all]
     csub = frames_of(cam64, idx_all)
-    profiles = support_profiles(zsub, csub, [f.sigma for f in fr])
+    profiles = support_profiles(zsub, csub, [f.sigma for f in fr], noise.tiles(idx_all))
     groups: dict[tuple, list[int]] = {}
     for j, (f, p) in enumerate(zip(fr, profiles, strict=True)):
         if needs_measured_support(f, p):

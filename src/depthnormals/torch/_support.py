@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import torch
 
+from ..ddm.noise import TILE
 from ..ddm.support import (
     MIN_VALID,
     RADII,
@@ -57,8 +58,9 @@ def _fit(zf: torch.Tensor, centres: torch.Tensor, r: int, every: int, w: int, ca
 
 
 def _pairs(zf: torch.Tensor, h: int, w: int, r: int, cam) -> tuple[torch.Tensor, torch.Tensor]:
-    """The rows of ``ddm.support._pairs`` for every frame: (B, P, 3) (angle in degrees, the
-    larger residual variance, the first window's depth) and (B, P) where a row exists."""
+    """The rows of ``ddm.support._pairs`` for every frame: (B, P, 4) (angle in degrees, the
+    larger residual variance, the first window's depth, the index of its noise tile) and (B,
+    P) where a row exists."""
     step = sample_step(h, w, r)
     every = sample_every(r)
     d = 2 * r + 1
@@ -66,7 +68,7 @@ def _pairs(zf: torch.Tensor, h: int, w: int, r: int, cam) -> tuple[torch.Tensor,
     vs = torch.tensor(list(range(r, h - r, step)), dtype=torch.long, device=dev)
     us = torch.tensor(list(range(r, w - r, step)), dtype=torch.long, device=dev)
     if vs.numel() == 0 or us.numel() == 0:  # the image is smaller than one window
-        return zf.new_zeros((zf.shape[0], 0, 3)), torch.zeros((zf.shape[0], 0), dtype=torch.bool, device=dev)
+        return zf.new_zeros((zf.shape[0], 0, 4)), torch.zeros((zf.shape[0], 0), dtype=torch.bool, device=dev)
     gv, gu = torch.meshgrid(vs, us, indexing="ij")
     c0 = torch.stack((gv.reshape(-1), gu.reshape(-1)), 1)
     n = c0.shape[0]
@@ -78,6 +80,8 @@ def _pairs(zf: torch.Tensor, h: int, w: int, r: int, cam) -> tuple[torch.Tensor,
     s_all, n_all = _fit(zf, cs, r, every, w, cam)
     s0, n0 = s_all[:, :n], n_all[:, :n]
     zc = zf[:, c0[:, 0] * w + c0[:, 1]]
+    tw = (w + TILE - 1) // TILE
+    tile = ((c0[:, 0] // TILE) * tw + c0[:, 1] // TILE).to(zf.dtype)[None]
     first = ~torch.isnan(zc) & ~torch.isnan(s0)
     rows, oks = [], []
     for o in range(2):
@@ -86,21 +90,24 @@ def _pairs(zf: torch.Tensor, h: int, w: int, r: int, cam) -> tuple[torch.Tensor,
         ok = first & inside & ~torch.isnan(s1)
         dot = torch.clamp((n0 * n1).sum(-1), -1.0, 1.0)
         ang = torch.rad2deg(torch.acos(torch.where(ok, dot, 1.0)))
-        rows.append(torch.stack((ang, torch.maximum(s0, s1), zc), -1))
+        rows.append(torch.stack((ang, torch.maximum(s0, s1), zc, tile.expand_as(zc)), -1))
         oks.append(ok)
     return torch.cat(rows, 1), torch.cat(oks, 1)
 
 
-def support_profiles(z: torch.Tensor, cam, sigmas: list[float]) -> list[SupportProfile]:
+def support_profiles(z: torch.Tensor, cam, sigmas: list[float],
+                     tiles: torch.Tensor | None = None) -> list[SupportProfile]:
     """The support profile of every frame of prepared depth ``z`` (B, H, W) float64 (NaN at
     invalid pixels), ``cam`` ``(fx, fy, cx, cy)`` (B or 1, 1, 1), ``sigmas`` the frames'
-    noise levels: :func:`depthnormals.ddm.support.support_profile` per frame, the pairs
-    fitted here for every radius (one host transfer)."""
+    noise levels, ``tiles`` their tile levels (B, TY, TX), for the profiles' ``local``
+    excess: :func:`depthnormals.ddm.support.support_profile` per frame, the pairs fitted
+    here for every radius (one host transfer)."""
     b, h, w = z.shape
     with torch.no_grad():
         zf = z.reshape(b, -1)
         c = tuple(q.reshape(-1, 1).to(z.dtype).expand(b, 1) for q in cam)
         per_radius = [_pairs(zf, h, w, r, c) for r in RADII]
         host = [(rows.cpu().numpy(), ok.cpu().numpy()) for rows, ok in per_radius]
-    return profiles_from_pair_tables(host, sigmas)
+    lev = None if tiles is None else tiles.cpu().numpy()
+    return profiles_from_pair_tables(host, sigmas, tiles=lev)
 
