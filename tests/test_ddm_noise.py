@@ -110,6 +110,41 @@ def test_box_radius_follows_the_noise():
     assert box_radius(100.0) == 6
 
 
+def test_big_radius_follows_the_noise():
+    """The large centred window: 17x17 up to 0.29 footprints (predicted 0.2 deg), growing to
+    33x33 from about 1 footprint, never below the small windows; 17x17 without a level."""
+    from depthnormals.ddm.auto import BIG_RADIUS, MAX_BIG_RADIUS, big_radius
+
+    assert big_radius(float("nan")) == big_radius(0.0) == big_radius(0.29) == BIG_RADIUS == 8
+    assert big_radius(0.3) == 9 and big_radius(0.5) == 11
+    assert big_radius(1.0) == big_radius(100.0) == MAX_BIG_RADIUS == 16
+    sig = np.geomspace(0.01, 50.0, 200)
+    radii = [big_radius(s) for s in sig]
+    assert radii == sorted(radii) and all(b >= box_radius(s) for b, s in zip(radii, sig, strict=True))
+
+
+@pytest.mark.parametrize(("scene", "noise", "before", "bound"), [
+    ("tilted-plane", "gaussian", 0.76, 0.25), ("tilted-plane", "tof", 1.60, 0.55),
+    ("box-on-floor", "tof", 1.91, 1.1), ("sphere-before-wall", "gaussian", 0.88, 0.65)])
+def test_the_large_window_on_noisier_depth(scene, noise, before, bound):
+    """Where one plane holds a 33x33 window within the noise, the default takes it on depth
+    of ~1 footprint of noise: the mean error (640x480, 1 footprint Gaussian or the tof model)
+    drops from ``before`` (a 17x17 large window, git e0e0173) below ``bound``; the map follows
+    (within 40 %)."""
+    from depthnormals.synth.noise import tof_noise
+
+    r = make_scene(scene).render(K=(525.0, 525.0, 319.5, 239.5), shape=(480, 640))
+    if noise == "tof":
+        d = np.asarray(tof_noise(r.depth, r.normals, r.K, rng=np.random.default_rng(1)))
+    else:
+        d = _noisy(r.depth, r.K.fx, 1.0, seed=2)
+    assert dn.noise_profile(d, r.K).branch == "box-fit"
+    n, u = dn.estimate_normals(d, r.K, return_uncertainty=True)
+    e = float(np.nanmean(dn.angular_error(n, r.normals)))
+    assert e < bound < before
+    assert 0.6 < float(np.nanmean(u)) / e < 1.6
+
+
 def test_auto_on_clean_depth_is_the_plane_selection():
     r = box_on_floor().render(shape=(120, 160), K=K_SMALL)
     d = r.depth.astype(np.float32)

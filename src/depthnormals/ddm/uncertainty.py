@@ -92,10 +92,10 @@ from .._parallel import run_rows
 from ..kernels.depth import prepare
 from ..metrics import angular_error
 from .auto import (
-    BIG_RADIUS,
     GATE,
     NOISE_CLEAN,
     _branch,
+    big_radius,
     box_radius,
     needs_measured_support,
     plane_select,
@@ -1203,7 +1203,7 @@ def _box_branch(z, cam, sigma, levels, prof):
     r = box_radius(sigma)
     scores: list = []
     t = np.maximum(levels, NOISE_CLEAN)
-    big = max(BIG_RADIUS, r)
+    big = big_radius(sigma)
     out = box_fit_from_prepared(z, fx, fy, cx, cy, radius=r, shift=r, gate=GATE * sigma * sigma,
                                 self_weight=1.0, big_radius=big, sigma=sigma,
                                 sigma_tiles=(t, TILE), out_scores=scores)

@@ -19,10 +19,10 @@ import math
 import torch
 
 from ..ddm.auto import (
-    BIG_RADIUS,
     GATE,
     KEEP_CHI2,
     NOISE_CLEAN,
+    big_radius,
     box_radius,
     branch_at,
     needs_measured_support,
@@ -58,13 +58,13 @@ def _half(cam64, k: int = 2):
     return tuple(c / k for c in cam64)
 
 
-def _iid(z64, valid, cam, noise: BatchNoise, idx, frames, r: int):
-    """:func:`depthnormals.ddm.auto.box_select` on the frames ``idx`` (all of radius ``r``)."""
+def _iid(z64, valid, cam, noise: BatchNoise, idx, frames, r: int, big_r: int):
+    """:func:`depthnormals.ddm.auto.box_select` on the frames ``idx`` (all of radius ``r``
+    and large radius ``big_r``)."""
     sig = [f.sigma for f in frames]
     noisy = sig[0] == sig[0] and sig[0] > 0.0  # the same for every frame of a group
     zs = torch.where(valid, z64, torch.ones_like(z64))
     fits = box_fits(zs, valid, r, cam)
-    big_r = max(BIG_RADIUS, r)
     big = box_fits(zs, valid, big_r, cam) if big_r > r else None
     if not noisy:  # explicit "box-fit" on clean depth: the least residual (box_fit_from_prepared)
         return choose_plain(valid, fits, big, r, 0.0, 0.0, 1.0, cam)
@@ -136,7 +136,7 @@ def noisy_select(z64: torch.Tensor, valid: torch.Tensor, cam64, noise: BatchNois
         if needs_measured_support(f, p):
             key = ("measured", p.radius, True)
         else:
-            key = ("iid", box_radius(f.sigma), f.sigma == f.sigma and f.sigma > 0.0)
+            key = ("iid", (box_radius(f.sigma), big_radius(f.sigma)), f.sigma == f.sigma and f.sigma > 0.0)
         groups.setdefault(key, []).append(j)
     k2 = KEEP_CHI2 if keep_chi2 is None else float(keep_chi2)
     parts, order = [], []
@@ -144,7 +144,8 @@ def noisy_select(z64: torch.Tensor, valid: torch.Tensor, cam64, noise: BatchNois
         jt = torch.tensor(js, device=dev)
         zg, vg, cg = zsub[jt], vsub[jt], frames_of(csub, jt)
         if kind == "iid":
-            out = _iid(zg, vg, cg, noise, idx_all[jt], [fr[j] for j in js], r)
+            r, big_r = r
+            out = _iid(zg, vg, cg, noise, idx_all[jt], [fr[j] for j in js], r, big_r)
             suu = (2 * r + 1) ** 2 * r * (r + 1) / 3.0
             kap = [k2 * f.sigma * f.sigma / suu if f.sigma == f.sigma else 0.0 for f in (fr[j] for j in js)]
         else:
