@@ -378,10 +378,11 @@ def local_excess(tables: list[tuple[np.ndarray, np.ndarray]], tiles: np.ndarray,
     noise grows steeply with depth (active stereo: ``sigma_z ~ z^2``, correlated over the
     matching window, so that second differences read it several times low in the far tiles)
     the far pairs have the largest residuals and drop out, and the far tiles' levels count
-    once each: on a room seen by the realsense_d4xx model the image-wide excess reads 0.7-1.9
-    while the box-fit errs 12-27 deg where the measured support errs 2.5-7 (docs/3f2n-plus.md,
-    "Correlated noise the image-wide excess misses"). Each pair read against its own tile's
-    level reads 2.5-10 there, at most 1.6 for the tof model and 1 for independent noise."""
+    once each: on a room seen by the realsense_d4xx model the image-wide excess reads 0.9-1.9
+    while the box-fit errs 9.5-17 deg where the measured support errs 0.8-5.3
+    (benchmarks/stereo_range.py; docs/3f2n-plus.md, "Correlated noise the image-wide excess
+    misses"). Each pair read against its own tile's level reads 2.5-6.8 there, at most 1.7 for
+    the tof model and 1.0 for independent noise."""
     lev = np.asarray(tiles, dtype=np.float64).ravel()
     lev = np.where(np.isfinite(lev), lev, sigma)
     best = float("nan")
@@ -408,7 +409,7 @@ def local_excess(tables: list[tuple[np.ndarray, np.ndarray]], tiles: np.ndarray,
 
 
 def _radius_stats(rows: np.ndarray, ok: np.ndarray) -> tuple:
-    """Per frame (rows (B, P, 3) of one radius, present where ``ok``): the number of pairs,
+    """Per frame (rows (B, P, 4) of one radius, present where ``ok``): the number of pairs,
     the measured mean error of one fit (:data:`PAIR_TO_ERROR` times the median angle of the
     pairs whose larger residual is at most the median one: edges drop out), the median
     residual of those, and which they are (B, P). Compiled (:func:`_radius_stats_rows`): the
