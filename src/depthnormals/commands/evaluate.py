@@ -141,6 +141,8 @@ def run(args: argparse.Namespace) -> int:
                         edge_radius=args.edge_radius, edge_angle=args.edge_angle,
                         depth_jump=args.depth_jump)
     resume = not args.no_resume
+    if args.batch_size < 1:  # refused with or without a scheduler (map_batches checks it there)
+        raise ValueError(f"--batch-size must be an integer >= 1; got {args.batch_size}")
     if args.scheduler is not None:  # the (frame, method) parts on Dask; the run below reuses them
         from ..evaluate._cluster import compute_parts
 
