@@ -37,8 +37,8 @@ from dataclasses import dataclass
 from itertools import islice
 from typing import Any, TypeVar
 
-__all__ = ["SchedulerSpec", "WorkerCodeMismatch", "connect", "local_cluster", "map_batches",
-           "parse_scheduler"]
+__all__ = ["SchedulerSpec", "WorkerCodeMismatch", "check_batch_size", "connect", "local_cluster",
+           "map_batches", "parse_scheduler"]
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -207,6 +207,15 @@ def _chunks(items: Iterable[T], size: int) -> Iterator[list[T]]:
         yield chunk
 
 
+def check_batch_size(batch_size: Any) -> int:
+    """``batch_size`` (items per Dask task) if it is an integer >= 1, else ValueError: the one
+    check of :func:`map_batches` and of the entry points that take one, which refuse it with
+    or without a scheduler (unused without one, it was read as if unset)."""
+    if isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1:
+        raise ValueError(f"batch_size must be an integer >= 1; got {batch_size!r}")
+    return batch_size
+
+
 def map_batches(func: Callable[[T], R], items: Iterable[T], *, client: Any = None,
                 batch_size: int = DEFAULT_BATCH, on_done: Callable[[T, R], None] | None = None,
                 threads: int | None = None) -> list[R]:
@@ -233,8 +242,7 @@ def map_batches(func: Callable[[T], R], items: Iterable[T], *, client: Any = Non
     list
         The results in completion order.
     """
-    if isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1:
-        raise ValueError(f"batch_size must be an integer >= 1; got {batch_size!r}")
+    check_batch_size(batch_size)
     results: list[R] = []
 
     def done(item: T, result: R) -> None:

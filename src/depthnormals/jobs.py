@@ -559,13 +559,13 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
         ``out_dir`` holds normals made with other settings and ``resume`` is True.
     """
     from ._progress import Progress
-    from ._validate import check_choice, check_int, check_positive
-    from .cluster import connect, map_batches
+    from ._validate import check_choice, check_positive
+    from .cluster import check_batch_size, connect, map_batches
     from .registry import get_estimator
 
     get_estimator(method[:-1] if method.endswith("+") else method)  # a bad name fails before any work
     check_choice(vis, "vis", VIS_CONVENTIONS)
-    check_int(batch_size, "batch_size", minimum=1, maximum=2**31 - 1)  # with or without a scheduler
+    check_batch_size(batch_size)
     if fmt not in FORMATS:
         raise ValueError(f"output format {fmt!r} not known; use one of {', '.join(FORMATS)}")
     if uncertainty:

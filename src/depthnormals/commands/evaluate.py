@@ -131,6 +131,7 @@ def _require_truth(dataset: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..cluster import check_batch_size
     from ..evaluate import Protocol, run_evaluation, summary_markdown
 
     if getattr(args, "reference", "gt") == "planes":
@@ -141,8 +142,7 @@ def run(args: argparse.Namespace) -> int:
                         edge_radius=args.edge_radius, edge_angle=args.edge_angle,
                         depth_jump=args.depth_jump)
     resume = not args.no_resume
-    if args.batch_size < 1:  # refused with or without a scheduler (map_batches checks it there)
-        raise ValueError(f"--batch-size must be an integer >= 1; got {args.batch_size}")
+    check_batch_size(args.batch_size)  # refused with or without a scheduler
     if args.scheduler is not None:  # the (frame, method) parts on Dask; the run below reuses them
         from ..evaluate._cluster import compute_parts
 

@@ -127,19 +127,19 @@ def big_radius(sigma: float) -> int:
     """The radius of the large centred window of the box-fit: the smallest from
     :data:`BIG_RADIUS` whose fitted normal has a predicted standard deviation ``sigma /
     sqrt(N r (r + 1) / 3)`` of at most :data:`BIG_TARGET_STD`, at most
-    :data:`MAX_BIG_RADIUS`; :data:`BIG_RADIUS` for NaN or zero noise (and never below
-    :func:`box_radius`). The window is taken only where its residual is within the gate (one
-    plane within the noise), so a larger one costs nothing on curved or cluttered depth and
-    halves the error on the planes of noisier depth: 17x17 up to 0.29 footprints, 33x33 from
-    about 1 (session 30, docs/3f2n-plus.md "The large window grows with the noise")."""
-    r = box_radius(sigma)
+    :data:`MAX_BIG_RADIUS`; :data:`BIG_RADIUS` for NaN or zero noise (always above
+    :func:`box_radius`, which stops at :data:`MAX_RADIUS`). The window is taken only where its
+    residual is within the gate (one plane within the noise), so a larger one costs nothing on
+    curved or cluttered depth and halves the error on the planes of noisier depth: 17x17 up to
+    0.29 footprints, 33x33 from about 1 (session 30, docs/3f2n-plus.md "The large window grows
+    with the noise")."""
     if not sigma > 0.0:
-        return max(BIG_RADIUS, r)
-    for big in range(BIG_RADIUS, MAX_BIG_RADIUS + 1):
+        return BIG_RADIUS
+    for big in range(BIG_RADIUS, MAX_BIG_RADIUS):
         n = (2 * big + 1) ** 2
         if sigma / math.sqrt(n * big * (big + 1) / 3.0) <= BIG_TARGET_STD:
-            return max(big, r)
-    return max(MAX_BIG_RADIUS, r)
+            return big
+    return MAX_BIG_RADIUS
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")

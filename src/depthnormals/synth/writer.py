@@ -30,8 +30,8 @@ import numpy as np
 
 from .._fingerprint import code_fingerprint
 from .._progress import Progress
-from .._validate import check_int
 from ..camera import as_intrinsics
+from ..cluster import check_batch_size
 from ..datasets.synthetic import read_synthetic
 from ..io import write_bytes_atomic, write_png
 from ..render import KINECT_V2, KINECT_V2_SIZE
@@ -181,7 +181,7 @@ def generate(out: str | Path, *, indoor: int = 10, outdoor: int = 10, views: int
     h, w = int(size[0]), int(size[1])
     if storage not in STORAGES:
         raise ValueError(f"storage must be one of {', '.join(STORAGES)}; got {storage!r}")
-    check_int(batch_size, "batch_size", minimum=1, maximum=2**31 - 1)  # with or without a scheduler
+    check_batch_size(batch_size)
     if isinstance(noise, str):
         noise = [noise]
     models: dict[str, dict] = {}

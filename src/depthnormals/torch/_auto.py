@@ -134,17 +134,16 @@ def noisy_select(z64: torch.Tensor, valid: torch.Tensor, cam64, noise: BatchNois
     groups: dict[tuple, list[int]] = {}
     for j, (f, p) in enumerate(zip(fr, profiles, strict=True)):
         if needs_measured_support(f, p):
-            key = ("measured", p.radius, True)
-        else:
-            key = ("iid", (box_radius(f.sigma), big_radius(f.sigma)), f.sigma == f.sigma and f.sigma > 0.0)
+            key = ("measured", p.radius, True, 0)
+        else:  # one group per pair of window radii (the large one grows with the noise)
+            key = ("iid", box_radius(f.sigma), f.sigma == f.sigma and f.sigma > 0.0, big_radius(f.sigma))
         groups.setdefault(key, []).append(j)
     k2 = KEEP_CHI2 if keep_chi2 is None else float(keep_chi2)
     parts, order = [], []
-    for (kind, r, _), js in groups.items():
+    for (kind, r, _, big_r), js in groups.items():
         jt = torch.tensor(js, device=dev)
         zg, vg, cg = zsub[jt], vsub[jt], frames_of(csub, jt)
         if kind == "iid":
-            r, big_r = r
             out = _iid(zg, vg, cg, noise, idx_all[jt], [fr[j] for j in js], r, big_r)
             suu = (2 * r + 1) ** 2 * r * (r + 1) / 3.0
             kap = [k2 * f.sigma * f.sigma / suu if f.sigma == f.sigma else 0.0 for f in (fr[j] for j in js)]
