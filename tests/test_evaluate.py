@@ -21,6 +21,7 @@ from depthnormals.evaluate import (
     HIST_BIN_DEG,
     Protocol,
     discontinuity_mask,
+    group_levels_key,
     parse_method_spec,
     pooled_median,
     read_results_csv,
@@ -448,6 +449,18 @@ def test_group_levels_pool_groups(tiny_3f2n, tmp_path):
     assert s["frames"] == 3
     assert s["e_A"] == pytest.approx(np.mean([r["mean_deg"] for r in res.rows]), rel=1e-12)
     assert [r["group"] for r in res.rows] == ["Easy/box", "Easy/box", "Easy/sphere"]
+
+
+@pytest.mark.parametrize("levels", [[2], [0, 2], [-3]])
+def test_group_levels_outside_the_names_are_refused(tiny_3f2n, tmp_path, levels):
+    """The group names here have two components: a third level was dropped silently, and a
+    name with no level left summarised apart, so [2] gave the unpooled table."""
+    with pytest.raises(ValueError, match=r"name no component of the group 'Easy/.*levels 0\.\.1"):
+        run_evaluation(tiny_3f2n, "d2nt", tmp_path, figures=0, group_levels=levels)
+    assert not (tmp_path / "summary.json").exists()
+    assert group_levels_key([-1])("Easy/box") == "box"
+    with pytest.raises(ValueError, match="name no component"):
+        group_levels_key([1])("Easy")
 
 
 def test_generated_benchmark_equals_normal_metrics(tmp_path):

@@ -27,7 +27,7 @@ from ._env import machine_description
 from ._methods import MethodSpec, resolve_methods
 from ._protocol import HIST_BIN_DEG, Protocol, discontinuity_mask, score_frame, scoring_mask
 from ._store import PartStore, write_json, write_results_csv, write_text
-from ._summary import ALL_GROUPS, group_levels_key, summarize, summary_markdown
+from ._summary import ALL_GROUPS, check_group_levels, group_levels_key, summarize, summary_markdown
 
 __all__ = ["EvaluationPlan", "EvaluationResult", "plan_evaluation", "run_evaluation"]
 
@@ -543,6 +543,8 @@ def _run_frames(frame_iter: Iterator[Frame], plan: EvaluationPlan, dataset_id: s
         for i, frame in enumerate(frame_iter):
             if plan.frames is not None and i >= plan.frames:
                 break
+            if plan.group_levels is not None:  # fail at the frame, not after the run
+                check_group_levels(plan.group_levels, frame.group)
             _evaluate_frame(frame, plan, store, dataset_id, tally, resume=resume, fig_dir=fig_dir)
             bar.update(f"{frame.group}/{frame.name}",
                        line=f"evaluate: frame {bar.count + 1} {frame.group}/{frame.name} "

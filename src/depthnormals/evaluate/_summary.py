@@ -10,8 +10,8 @@ import numpy as np
 
 from ._protocol import HIST_BIN_DEG
 
-__all__ = ["ALL_GROUPS", "group_levels_key", "pooled_median", "summarize", "summary_markdown",
-           "threshold_curve"]
+__all__ = ["ALL_GROUPS", "check_group_levels", "group_levels_key", "pooled_median", "summarize",
+           "summary_markdown", "threshold_curve"]
 
 #: Name of the pseudo-group pooling every frame (present when there are several groups).
 ALL_GROUPS = "(all)"
@@ -30,10 +30,25 @@ def group_levels_key(levels: Sequence[int]) -> Callable[[str], str]:
         raise ValueError("group levels must name at least one component (0-based)")
 
     def key(group: str) -> str:
+        check_group_levels(levels, group)
         parts = group.split("/")
-        return "/".join(parts[i] for i in levels if -len(parts) <= i < len(parts)) or group
+        return "/".join(parts[i] for i in levels)
 
     return key
+
+
+def check_group_levels(levels: Sequence[int], group: str) -> None:
+    """ValueError when a level names no component of ``group`` (levels may count from the end).
+
+    A level past the end of a name used to be dropped, and a name with none left was kept
+    whole: ``--group-levels 3`` on ``indoor/room-03/clean`` summarised every group apart,
+    silently.
+    """
+    n = len(group.split("/"))
+    bad = [int(i) for i in levels if not -n <= int(i) < n]
+    if bad:
+        raise ValueError(f"group level(s) {bad} name no component of the group {group!r} "
+                         f"({n} '/'-separated components: levels 0..{n - 1} or -{n}..-1)")
 
 
 def pooled_median(hist: np.ndarray) -> float:
