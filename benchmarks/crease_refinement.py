@@ -1,5 +1,13 @@
-"""A candidate for the default's noisy branches: each pixel by a crease takes the face whose plane
-explains its own 3x3 (a prototype, measured here; not in the library).
+"""The session-19 prototype of the face switch: each pixel by a crease takes the face whose plane
+explains its own 3x3 (numpy; measured here).
+
+Since session 31 the rule is in the library, the last step of the measured-support branch
+(``depthnormals.ddm.faceswitch``: without the tile gate below, which changed nothing measurable
+on the frames that run it, and with a margin, the other face's fit below 0.7 times its own
+face's; docs/benchmarks.md section 22): this script now runs on an output that has it, and
+compares the prototype's second pass with it (``--fit 1e30`` and the library's ``MARGIN = 1.0``
+give the library's decisions: tests/test_ddm_faceswitch.py checks the kernel against a numpy
+reference of the same rule).
 
 Why: within 10 px of the creases of the real frames' planes (``evaluate.crease_band``) the
 default errs more than PCL's average-3D-gradient (docs/benchmarks.md section 16, "Session 19"):

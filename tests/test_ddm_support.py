@@ -14,9 +14,10 @@ import pytest
 
 import depthnormals as dn
 from depthnormals.analytic import make_scene, tilted_plane
-from depthnormals.ddm import auto, noise, support
+from depthnormals.ddm import auto, faceswitch, noise, support
 from depthnormals.ddm.noise import QUANT_SHARE, noise_pass, quantisation_step
 from depthnormals.kernels.depth import prepare
+from faceswitch_reference import reference_switch
 
 K = (525.0, 525.0, 319.5, 239.5)
 
@@ -328,11 +329,13 @@ def test_fast_choice_agrees_with_the_per_pixel_reference(radius):
     # some pixels of the box's faces deviate, most do not
     assert 0.0 < np.mean(fast_dev > support.DEVIATION) < 0.05
     # the branch: below HALF_RADIUS those rows; from it on the choice of every 2x2 cell; then
-    # the fallback of the deviating pixels
+    # the fallback of the deviating pixels, then the face switch (tests/faceswitch_reference.py)
     out = support.support_select(z, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma, profile=prof)
     if radius < support.HALF_RADIUS:
-        assert np.array_equal(out, _reference_fallback(z, args[4], fast_dev, fast),
-                              equal_nan=True)
+        ref = _reference_fallback(z, args[4], fast_dev, fast)
+        ref, switched = reference_switch(z, ref, args[4], faceswitch.SPAN)
+        assert switched.any()
+        assert np.array_equal(out, ref, equal_nan=True)
     else:
         zd = np.ascontiguousarray(z[::2, ::2])
         hargs = support.choice_inputs(zd, cam.fx / 2, cam.fy / 2, cam.cx / 2, cam.cy / 2, prof,
@@ -341,6 +344,7 @@ def test_fast_choice_agrees_with_the_per_pixel_reference(radius):
         half, hdev = _reference_choice(zfill, hargs)
         hdev[np.isnan(zd)] = 0.0
         half = _reference_fallback(zd, hargs[4], hdev, half)
+        half, _ = reference_switch(zd, half, hargs[4], faceswitch.SPAN // 2)
         up = np.repeat(np.repeat(half, 2, axis=0), 2, axis=1)[:z.shape[0], :z.shape[1]]
         ok = np.isfinite(out[..., 0])
         # the same window's normal, turned toward each pixel's own ray

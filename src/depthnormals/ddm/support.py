@@ -57,6 +57,8 @@ import numpy as np
 
 from .._parallel import run_rows
 from .boxfit import SHIFTS, box_fit_windows, solve_window
+from .faceswitch import SPAN as SWITCH_SPAN
+from .faceswitch import switch_faces
 from .noise import TILE
 
 __all__ = ["BIG_FACTOR", "EXCESS_FLOOR", "GATE", "LOCAL_KEEP", "LOCAL_MAX_RADIUS", "MAX_RADIUS",
@@ -806,9 +808,15 @@ def support_select(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
     (every second row and column from :data:`HALF_RADIUS` on), the residual variances of the
     chosen radius's windows (footprints^2 of the profile), their shift, the normals chosen
     before the fallback, the deviations, the limit past which pixels fell back (inf where the
-    radius allows none), whether that grid is the half one and the normals on that grid after
-    the fallback (the output, but not yet turned toward each pixel's ray on the half grid), for
-    the uncertainty map (:mod:`depthnormals.ddm.uncertainty`); the normals do not change."""
+    radius allows none), whether that grid is the half one, the normals on that grid after
+    the fallback and the face switch (the output, but not yet turned toward each pixel's ray
+    on the half grid) and the face switch's decisions
+    (:func:`depthnormals.ddm.faceswitch.switch_faces`), for the uncertainty map
+    (:mod:`depthnormals.ddm.uncertainty`); the normals do not change.
+
+    Last on the grid of the choice, a cell by a crease takes the other face's normal where
+    that face's plane explains its 3x3 clearly better
+    (:mod:`depthnormals.ddm.faceswitch`)."""
     p = support_profile(z, fx, fy, cx, cy, sigma) if profile is None else profile
     h, w = z.shape
     out = np.empty((h, w, 3), dtype=np.float32)
@@ -816,8 +824,10 @@ def support_select(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
     if p.radius < HALF_RADIUS:
         args = choice_inputs(z, fx, fy, cx, cy, p)
         dev, limit, before = _choose(z, z, args, out, 16, keep)
+        out, _, decisions = switch_faces(z, out, fx, fy, cx, cy, span=SWITCH_SPAN,
+                                         decisions=keep)
         if keep:
-            out_scores.extend((args[0][1], args[2], before, dev, limit, False, out))
+            out_scores.extend((args[0][1], args[2], before, dev, limit, False, out, decisions))
         return out
     zd = np.ascontiguousarray(z[::2, ::2])
     cam = (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy)
@@ -826,8 +836,10 @@ def support_select(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
     zfill = np.where(np.isnan(zd), zd.dtype.type(p.depth if p.depth == p.depth else 1.0), zd)
     half = np.empty((zd.shape[0], zd.shape[1], 3), dtype=np.float32)
     dev, limit, before = _choose(zd, zfill, args, half, 8, keep)
+    half, _, decisions = switch_faces(zd, half, *cam, span=SWITCH_SPAN // 2, decisions=keep,
+                                      min_rows=8)
     if keep:
-        out_scores.extend((args[0][1], args[2], before, dev, limit, True, half))
+        out_scores.extend((args[0][1], args[2], before, dev, limit, True, half, decisions))
     run_rows(_upsample_rows, h, z, half, (float(fx), float(fy), float(cx), float(cy)), out,
              min_rows=16)
     return out

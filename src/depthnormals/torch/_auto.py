@@ -27,11 +27,13 @@ from ..ddm.auto import (
     branch_at,
     needs_measured_support,
 )
+from ..ddm.faceswitch import SPAN as SWITCH_SPAN
 from ..ddm.noise import TILE
 from ..ddm.support import BIG_FACTOR, HALF_RADIUS
 from ..ddm.support import GATE as SUPPORT_GATE
 from ..ddm.support import MAX_RADIUS as SUPPORT_MAX
 from ._boxfit import box_fits, choose_least, choose_local, choose_plain, keep_estimator, upsample_half
+from ._faceswitch import switch_faces
 from ._noise import BatchNoise, noise_pass
 from ._support import support_profiles
 
@@ -97,8 +99,9 @@ def _measured(z64, valid, cam, profiles, r: int):
             vd = valid[:, ::2, ::2]
             big = box_fits(zs[:, ::2, ::2], vd, (big_r + 1) // 2, _half(cam))
             big.score = big.score * 4.0
-        return choose_least(zs, valid, fits, big, r, gate, zref, half, cam,
-                            fallback=(unit, zs, valid))
+        n = choose_least(zs, valid, fits, big, r, gate, zref, half, cam,
+                         fallback=(unit, zs, valid))
+        return switch_faces(torch.where(valid, z64, math.nan), n, cam, SWITCH_SPAN)[0]
     # every second row and column: windows of half the radius, then every pixel takes its cell's
     rd = round(r / 2)
     vd = valid[:, ::2, ::2]
@@ -115,6 +118,7 @@ def _measured(z64, valid, cam, profiles, r: int):
     zfill = torch.where(vd, zd, fill)
     half_n = choose_least(zfill, torch.ones_like(vd), fits, big, rd, gate, zref, half, camd,
                           fallback=(unit, zd, vd))
+    half_n = switch_faces(torch.where(vd, zd, math.nan), half_n, camd, SWITCH_SPAN // 2)[0]
     return upsample_half(half_n, valid, cam)
 
 
