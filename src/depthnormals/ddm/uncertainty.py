@@ -66,14 +66,18 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
   :data:`FALLBACK_SCALE` times their map, and (session 24) at least a share of the angle
   between the output normals across each edge of their cell whose neighbour fell back too
   (:data:`CREASE_FLOOR`, :func:`_cell_edges_rows`): at a face boundary where both fell back,
-  one took the wrong face or both lie between the faces;
+  one took the wrong face or both lie between the faces; then (session 31) where the face
+  switch (:mod:`depthnormals.ddm.faceswitch`) examined the pixel's cell, at least the angle
+  between the two faces times the chance of the wrong one, read from how clearly one face's
+  fit won (:data:`DECIDED_MAP`, :func:`_decided_rows`), and last every value compressed as
+  ``x / (1 + x / SATURATION)``;
 - **clean depth** (the plane hypotheses): the float rounding of the one-pixel stencils
   (``sigma / sqrt(6)``) plus, where the pixel's normal agrees with none of its four neighbours'
   (a facet narrower than two pixels: no one-sided stencil fits), the least angle between them.
 
 Vectorised passes per image (:func:`_fit_error_rows`, :func:`_spreads_rows`,
 :func:`_offsets_rows`, :func:`_edge_integrals`, :func:`_support_rows`, :func:`_spread_rows`,
-:func:`_cell_edges_rows`, :func:`_upsample_rows`) over
+:func:`_cell_edges_rows`, :func:`_upsample_rows`, :func:`_decided_rows`) over
 quantities the branches already computed; the densities are read on every second row and
 column of the map's grid. Conversions to the von
 Mises-Fisher concentration of Bae et al. (ICCV 2021): :func:`uncertainty_to_kappa`,
@@ -227,7 +231,7 @@ DECIDED_MAP = (0.9, 1.2, 1.0, 3.0, 0.5)
 #: read 0.63-0.87 of their error on every set (an unreliable normal errs like a random one, not
 #: without bound).
 SATURATION = 200.0
-#: Measured support, last: at least ``a A``, ``A`` the angle (degrees) between the output
+#: Measured support, after its own terms: at least ``a A``, ``A`` the angle (degrees) between the output
 #: normals of two adjacent cells of the choice's grid that both fell back to small windows,
 #: where it exceeds ``theta``: the edges of the pixel's cell that the pixel lies on at ``a``,
 #: the cell's other edges at ``a w`` (on the pixel grid a pixel lies on all four);
