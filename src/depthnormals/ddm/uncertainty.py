@@ -1295,23 +1295,33 @@ def _decided_rows(v0, v1, dec, shift, params, sat, out):
     a, s_neg, s_pos, e_r, keep = params
     f32 = np.float32
     w = out.shape[1]
+    wc = dec.shape[2]
     isat = f32(1.0 / sat)
     cap = f32(MAX_ERROR)
+    floor = np.empty(wc, dtype=f32)  # per cell: the floor (-inf: not examined), the factor
+    fac = np.empty(wc, dtype=f32)  # and the cap (inf: not examined)
+    top = np.empty(wc, dtype=f32)
     for v in range(v0, v1):
         o = out[v]
         lr = dec[0, v >> shift]
         tr = dec[1, v >> shift]
+        for c in range(wc):  # branch-free: a cell that saw no other face keeps its map
+            L = lr[c]
+            seen = L == L
+            s = s_neg if L < 0.0 else s_pos
+            q = L / s
+            p = a / (1.0 + q * q)
+            m = f32(p * tr[c] + (1.0 - p) * e_r)
+            floor[c] = m if seen else f32(-np.inf)
+            fac[c] = f32(keep) if seen else f32(1.0)
+            top[c] = cap if seen else f32(np.inf)
         for u in range(w):
             x = o[u]
-            L = lr[u >> shift]
-            if L == L and x == x:
-                s = s_neg if L < 0.0 else s_pos
-                q = L / s
-                p = a / (1.0 + q * q)
-                m = f32(p * tr[u >> shift] + (1.0 - p) * e_r)
-                k = f32(keep) * x
-                x = m if m > k else k
-                x = x if x < cap else cap
+            m = floor[u >> shift]
+            k = fac[u >> shift] * x
+            x = m if m > k else k  # NaN stays NaN (k is NaN, and NaN > m is false)
+            t = top[u >> shift]
+            x = t if x > t else x
             o[u] = x / (f32(1.0) + x * isat)
 
 
