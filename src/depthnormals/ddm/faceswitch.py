@@ -176,17 +176,25 @@ def _sums_row(t, z, n, cam, rows, tmp, out):
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _distance(n, sums, r, q, p, cov):
-    """The mean squared distance of a cell's 3x3 points (centroid ``p``, covariance ``cov``:
-    xx, xy, xz, yy, yz, zz) to the plane of cell (r, q) (normal ``n[:, r, q]``, through the
-    centroid of its own 3x3, ``sums[10:13, q]``): ``n^T C n + (n . (c_p - c_q))^2``."""
+def _quad(qx, qy, qz, cov, u):
+    """``q^T C q`` of the covariance ``C`` stored in column ``u`` of ``cov`` (6, W: xx, xy,
+    xz, yy, yz, zz)."""
+    return (qx * qx * cov[0, u] + qy * qy * cov[3, u] + qz * qz * cov[5, u]
+            + 2.0 * (qx * qy * cov[1, u] + qx * qz * cov[2, u] + qy * qz * cov[4, u]))
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _distance(n, sums, r, q, acc, cov, u):
+    """The mean squared distance of the 3x3 points of the row's cell ``u`` (centroid
+    ``acc[10:13, u]``, covariance ``cov[:, u]``) to the plane of cell (r, q) (normal
+    ``n[:, r, q]``, through the centroid of its own 3x3, ``sums[10:13, q]``):
+    ``n^T C n + (n . (c_p - c_q))^2``."""
     qx = np.float64(n[0, r, q])
     qy = np.float64(n[1, r, q])
     qz = np.float64(n[2, r, q])
-    d = qx * (p[0] - sums[10, q]) + qy * (p[1] - sums[11, q]) + qz * (p[2] - sums[12, q])
-    m = (qx * qx * cov[0] + qy * qy * cov[3] + qz * qz * cov[5]
-         + 2.0 * (qx * qy * cov[1] + qx * qz * cov[2] + qy * qz * cov[4]))
-    return m + d * d
+    d = (qx * (acc[10, u] - sums[10, q]) + qy * (acc[11, u] - sums[11, q])
+         + qz * (acc[12, u] - sums[12, q]))
+    return _quad(qx, qy, qz, cov, u) + d * d
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -212,8 +220,7 @@ def _switch_rows(v0, v1, z, n, cam, span, cos_min, jump, margin, want, out, out_
     dist = np.empty(w)
     obits = np.empty(w, dtype=np.uint8)  # the directions of another face, and of its own
     sbits = np.empty(w, dtype=np.uint8)
-    p = np.empty(3)
-    cov = np.empty(6)
+    cov = np.empty((6, w))  # the row's covariances
     tiny = 1e-300
     cm = np.float32(cos_min)
     two = np.float32(2.0)
@@ -251,25 +258,20 @@ def _switch_rows(v0, v1, z, n, cam, span, cos_min, jump, margin, want, out, out_
                 fl = smooth[lo:hi]
                 for i in range(hi - lo):
                     fl[i] = fl[i] & ~(abs(zq[i] - zc[i]) > jump * zc[i])
-        # the own plane's fit of every cell (as _distance computes it, d = 0 there)
-        a4, a5, a6, a7, a8, a9 = acc[4], acc[5], acc[6], acc[7], acc[8], acc[9]
+        # every cell's covariance, and its own plane's fit (d = 0 there)
         c0, c1, c2, ir = acc[10], acc[11], acc[12], acc[13]
         for u in range(w):
             px = c0[u]
             py = c1[u]
             pz = c2[u]
             ic = ir[u]
-            k0 = a4[u] * ic - px * px
-            k1 = a5[u] * ic - px * py
-            k2 = a6[u] * ic - px * pz
-            k3 = a7[u] * ic - py * py
-            k4 = a8[u] * ic - py * pz
-            k5 = a9[u] * ic - pz * pz
-            qx = np.float64(x0[u])
-            qy = np.float64(x1[u])
-            qz = np.float64(x2[u])
-            own[u] = (qx * qx * k0 + qy * qy * k3 + qz * qz * k5
-                      + 2.0 * (qx * qy * k1 + qx * qz * k2 + qy * qz * k4)) + 0.0 * 0.0
+            cov[0, u] = acc[4, u] * ic - px * px
+            cov[1, u] = acc[5, u] * ic - px * py
+            cov[2, u] = acc[6, u] * ic - px * pz
+            cov[3, u] = acc[7, u] * ic - py * py
+            cov[4, u] = acc[8, u] * ic - py * pz
+            cov[5, u] = acc[9, u] * ic - pz * pz
+            own[u] = _quad(np.float64(x0[u]), np.float64(x1[u]), np.float64(x2[u]), cov, u)
         # the cosines to the eight cells (2 outside the image or without a normal), along
         # slices from 0 (vectorised); a direction of another face counts where its plane
         # passes within sqrt(margin own) of the cell's centroid (a plane at distance d fits
@@ -306,15 +308,16 @@ def _switch_rows(v0, v1, z, n, cam, span, cos_min, jump, margin, want, out, out_
                 dot = a0[i] * y0[i] + a1[i] * y1[i] + a2[i] * y2[i]
                 ds[i] = dot if dot == dot else two
             dd = dist[lo:hi]
-            if not want:
+            if want:
+                dd[:] = -1.0
+            else:
                 for i in range(hi - lo):
                     d = (y0[i] * (p0[i] - q0[i]) + y1[i] * (p1[i] - q1[i])
                          + y2[i] * (p2[i] - q2[i]))
                     dd[i] = d * d - margin * ow[i]
             for i in range(hi - lo):
                 dot = ds[i]
-                near = want | (dd[i] < 0.0)
-                ob[i] |= bit if (dot < cm) & near else np.uint8(0)
+                ob[i] |= bit if (dot < cm) & (dd[i] < 0.0) else np.uint8(0)
                 sb[i] |= bit if (dot >= cm) & (dot <= np.float32(1.5)) else np.uint8(0)
         c = 0
         for u in range(w):  # the cells that see another face, without a branch
@@ -322,23 +325,13 @@ def _switch_rows(v0, v1, z, n, cam, span, cos_min, jump, margin, want, out, out_
             c += (obits[u] != 0) & smooth[u]
         for j0 in range(c):
             u = idx[j0]
-            ic = acc[13, u]
-            p[0] = acc[10, u]
-            p[1] = acc[11, u]
-            p[2] = acc[12, u]
-            cov[0] = acc[4, u] * ic - p[0] * p[0]
-            cov[1] = acc[5, u] * ic - p[0] * p[1]
-            cov[2] = acc[6, u] * ic - p[0] * p[2]
-            cov[3] = acc[7, u] * ic - p[1] * p[1]
-            cov[4] = acc[8, u] * ic - p[1] * p[2]
-            cov[5] = acc[9, u] * ic - p[2] * p[2]
             other = np.inf
             best = -1
             ob = obits[u]
             for j in range(_COUNT[ob]):  # the other face's planes first (set bits: no branch
                 k = _BITS[ob, j]  # a direction whose test flips at random)
                 r = v + span * DIRECTIONS[k, 0]
-                m = _distance(n, ring[r % size], r, u + span * DIRECTIONS[k, 1], p, cov)
+                m = _distance(n, ring[r % size], r, u + span * DIRECTIONS[k, 1], acc, cov, u)
                 if m < other:
                     other = m
                     best = k
@@ -353,7 +346,7 @@ def _switch_rows(v0, v1, z, n, cam, span, cos_min, jump, margin, want, out, out_
                 k = _BITS[sb, j]
                 r = v + span * DIRECTIONS[k, 0]
                 same = min(same, _distance(n, ring[r % size], r, u + span * DIRECTIONS[k, 1],
-                                           p, cov))
+                                           acc, cov, u))
             if want:  # for the map: how clear the decision was, the angle to the other face
                 out_dec[0, v, u] = np.log(max(other, tiny) / max(same, tiny))
                 out_dec[1, v, u] = math.degrees(math.acos(min(max(np.float64(dots[best, u]),

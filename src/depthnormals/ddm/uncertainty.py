@@ -231,8 +231,9 @@ DECIDED_MAP = (0.9, 1.2, 1.0, 3.0, 0.5)
 #: read 0.63-0.87 of their error on every set (an unreliable normal errs like a random one, not
 #: without bound).
 SATURATION = 200.0
-#: Measured support, after its own terms: at least ``a A``, ``A`` the angle (degrees) between the output
-#: normals of two adjacent cells of the choice's grid that both fell back to small windows,
+#: Measured support, after its own terms: at least ``a A``, ``A`` the angle (degrees) between
+#: the output normals of two adjacent cells of the choice's grid that both fell back to small
+#: windows,
 #: where it exceeds ``theta``: the edges of the pixel's cell that the pixel lies on at ``a``,
 #: the cell's other edges at ``a w`` (on the pixel grid a pixel lies on all four);
 #: ``CREASE_FLOOR = (a, w, theta)``. Two neighbouring cells whose depth both left their
