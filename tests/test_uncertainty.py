@@ -1177,6 +1177,12 @@ def test_calibration_bench_refuses_a_missing_folder(tmp_path, monkeypatch, load_
     assert "no-such-folder: no such folder" in capsys.readouterr().err
 
 
+def _undecided(shape):
+    """Face switch decisions of cells that saw no other face (all NaN): with an infinite
+    saturation the map's last pass leaves every value as it was."""
+    return np.full((2, *shape), np.nan, dtype=np.float32)
+
+
 @pytest.mark.parametrize("w", [8, 9])
 def test_upsample_reads_the_cell_and_keeps_invalid_depth(w):
     """The half grid's map upsampled: each pixel its 2x2 cell's value, NaN exactly where the
@@ -1192,7 +1198,8 @@ def test_upsample_reads_the_cell_and_keeps_invalid_depth(w):
     out = np.full((h, w), -1.0, np.float32)
     edges = np.zeros((2, *coarse.shape), np.float32)
     for v0, v1 in ((0, 3), (3, h)):
-        U._upsample_rows(v0, v1, coarse, edges, 0.6, z, out)
+        U._upsample_rows(v0, v1, coarse, edges, 0.6, z, _undecided(coarse.shape),
+                         U.DECIDED_MAP, np.inf, out)
     want = np.repeat(np.repeat(coarse, 2, 0), 2, 1)[:h, :w]
     want[np.isnan(z)] = np.nan
     np.testing.assert_array_equal(out, want)
@@ -1239,7 +1246,8 @@ def test_upsample_floors_the_cell_by_its_edges(w):
     z[rng.random((h, w)) < 0.1] = np.nan
     out = np.full((h, w), -1.0, np.float32)
     for v0, v1 in ((0, 3), (3, 4), (4, h)):
-        U._upsample_rows(v0, v1, coarse, edges, 0.6, z, out)
+        U._upsample_rows(v0, v1, coarse, edges, 0.6, z, _undecided(coarse.shape),
+                         U.DECIDED_MAP, np.inf, out)
     want = _floor_ref(coarse, edges, 0.6, z, U.MAX_ERROR)
     np.testing.assert_allclose(out, want, rtol=1e-6)
     assert np.array_equal(np.isnan(out), np.isnan(want))
@@ -1298,7 +1306,7 @@ def test_floor_rows_take_the_largest_of_the_four_edges():
     m[0, 0] = np.nan
     out = m.copy()
     for v0, v1 in ((0, 2), (2, h)):
-        U._floor_rows(v0, v1, edges, out)
+        U._floor_rows(v0, v1, edges, _undecided((h, w)), U.DECIDED_MAP, np.inf, out)
     left = np.pad(edges[0], ((0, 0), (1, 0)))[:, :w]
     above = np.pad(edges[1], ((1, 0), (0, 0)))[:h]
     f = np.minimum(np.maximum.reduce([edges[0], left, edges[1], above]), U.MAX_ERROR)
@@ -1447,12 +1455,14 @@ def test_calibration_bench_band_profile_bins_by_distance(load_benchmark):
 
 
 @pytest.mark.parametrize("shift", [0, 1])
-def test_decided_rows_read_the_face_switch(shift):
+def test_decided_cells_read_the_face_switch(shift):
     """The measured support's map where the face switch examined the pixel's cell: at least
     ``P theta + (1 - P) e_r`` (``P = a / (1 + (L / s)^2)``, ``s`` by the sign of L) and at
     least ``keep`` times before, then every pixel ``x / (1 + x / sat)``; NaN stays NaN; a
-    pixel reads its cell (``v >> shift``, ``u >> shift``)."""
-    from depthnormals.ddm.uncertainty import DECIDED_MAP, SATURATION, _decided_rows
+    pixel reads its cell (``v >> shift``, ``u >> shift``): on the pixel grid (``_floor_rows``,
+    no crease edges) and upsampled from the half grid (``_upsample_rows``)."""
+    from depthnormals.ddm import uncertainty as U
+    from depthnormals.ddm.uncertainty import DECIDED_MAP, SATURATION
 
     a, s_neg, s_pos, e_r, keep = DECIDED_MAP
     h, w = 6, 8
@@ -1461,11 +1471,21 @@ def test_decided_rows_read_the_face_switch(shift):
     dec[:, 0, 0] = (0.0, 60.0)      # a tie: P = a, the map at least a 60 + (1 - a) e_r
     dec[:, 1, 1] = (-2.4, 40.0)     # a clear switch
     dec[:, 2, 1] = (5.0, 30.0)      # a clear stay
-    before = np.full((h, w), 3.0, dtype=np.float32)
-    before[0, 1] = 100.0            # above the floor: halved at most
-    before[5, 7] = np.nan
-    out = before.copy()
-    _decided_rows(0, h, dec, shift, DECIDED_MAP, SATURATION, out)
+    coarse = np.full(cells, 3.0, dtype=np.float32)
+    coarse[0, 1 >> shift] = 100.0   # above the floor: halved at most
+    z = np.full((h, w), 2.0, dtype=np.float32)
+    z[5, 7] = np.nan
+    edges = np.zeros((2, *cells), dtype=np.float32)
+    before = np.repeat(np.repeat(coarse, 1 << shift, 0), 1 << shift, 1)
+    before[np.isnan(z)] = np.nan
+    if shift:
+        out = np.empty((h, w), dtype=np.float32)
+        for v0, v1 in ((0, 3), (3, h)):
+            U._upsample_rows(v0, v1, coarse, edges, 0.6, z, dec, DECIDED_MAP, SATURATION, out)
+    else:
+        out = before.copy()
+        for v0, v1 in ((0, 3), (3, h)):
+            U._floor_rows(v0, v1, edges, dec, DECIDED_MAP, SATURATION, out)
 
     def sat(x):
         return x / (1.0 + x / SATURATION)
@@ -1482,8 +1502,12 @@ def test_decided_rows_read_the_face_switch(shift):
                 if (v >> shift, u >> shift) == (i, j) and np.isfinite(before[v, u]):
                     expect[v, u] = sat(max(floor(L, theta), keep * before[v, u]))
     assert np.allclose(out, expect, rtol=1e-5, equal_nan=True)
-    assert np.isnan(out[5, 7])
+    assert np.isnan(out[5, 7]) and np.isfinite(np.delete(out.ravel(), 5 * w + 7)).all()
     assert out[0, 0] == pytest.approx(sat(a * 60.0 + (1.0 - a) * e_r), rel=1e-5)
+    # 100 deg: on the half grid in the tie's cell (at least keep times it, and the floor),
+    # on the pixel grid in a cell that saw no other face (only saturated)
+    want = max(floor(0.0, 60.0), keep * 100.0) if shift else 100.0
+    assert out[0, 1] == pytest.approx(sat(want), rel=1e-5)
 
 
 def test_measured_support_map_follows_the_switch(monkeypatch):

@@ -69,7 +69,7 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
   one took the wrong face or both lie between the faces; then (session 31) where the face
   switch (:mod:`depthnormals.ddm.faceswitch`) examined the pixel's cell, at least the angle
   between the two faces times the chance of the wrong one, read from how clearly one face's
-  fit won (:data:`DECIDED_MAP`, :func:`_decided_rows`), and last every value compressed as
+  fit won (:data:`DECIDED_MAP`, :func:`_decided_cells`), and last every value compressed as
   ``x / (1 + x / SATURATION)``;
 - **clean depth** (the plane hypotheses): the float rounding of the one-pixel stencils
   (``sigma / sqrt(6)``) plus, where the pixel's normal agrees with none of its four neighbours'
@@ -77,7 +77,7 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
 
 Vectorised passes per image (:func:`_fit_error_rows`, :func:`_spreads_rows`,
 :func:`_offsets_rows`, :func:`_edge_integrals`, :func:`_support_rows`, :func:`_spread_rows`,
-:func:`_cell_edges_rows`, :func:`_upsample_rows`, :func:`_decided_rows`) over
+:func:`_cell_edges_rows`, :func:`_upsample_rows`, :func:`_floor_rows`) over
 quantities the branches already computed; the densities are read on every second row and
 column of the map's grid. Conversions to the von
 Mises-Fisher concentration of Bae et al. (ICCV 2021): :func:`uncertainty_to_kappa`,
@@ -1028,7 +1028,8 @@ def _context(zg, ng, big: int, cam: tuple, shift: int = 1, *, growth: tuple) -> 
     of their frame scales (:func:`_offset_scales`; ``growth = (zref, half)`` as in
     :func:`_support_rows`)."""
     h, w = zg.shape
-    planar = np.ascontiguousarray(ng.transpose(0, 2, 1))
+    planar = np.empty((h, 3, w), dtype=np.float32)  # by row (2x numpy's strided transpose)
+    run_rows(_by_rows, h, np.ascontiguousarray(ng, dtype=np.float32), planar, min_rows=16)
     spreads = np.empty((2, h, w), dtype=np.float32)
     run_rows(_spreads_rows, h, planar, NEAR_SPAN, max(1, big), spreads, min_rows=16)
     offsets = np.empty((len(DEPTH_SPANS), h, w), dtype=np.float32)
@@ -1110,6 +1111,14 @@ def _planar_row(normals, v, out3):
         x[u] = r[3 * u]
         y[u] = r[3 * u + 1]
         t[u] = r[3 * u + 2]
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _by_rows(v0, v1, normals, out):
+    """Rows ``[v0, v1)`` of ``normals`` (H, W, 3) C-contiguous into ``out`` (H, 3, W)
+    (:func:`_planar_row`)."""
+    for v in range(v0, v1):
+        _planar_row(normals, v, out[v])
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -1273,57 +1282,51 @@ def _support_branch(z, cam, sigma, prof):
     edges = np.empty((2, *zg.shape), dtype=np.float32)
     run_rows(_cell_edges_rows, zg.shape[0], final, math.degrees(a),
              math.cos(math.radians(theta)), dev, limit, edges, min_rows=rows)
+    # with it, the face switch's decisions (the cells that saw another face), then the
+    # saturation, in the same pass
     if not halved:
-        run_rows(_floor_rows, zg.shape[0], edges, grid, min_rows=16)
+        run_rows(_floor_rows, zg.shape[0], edges, decisions, DECIDED_MAP, SATURATION, grid,
+                 min_rows=16)
         unc = grid
     else:
         unc = np.empty(z.shape, dtype=np.float32)
-        run_rows(_upsample_rows, z.shape[0], grid, edges, far, z, unc, min_rows=16)
-    # the face switch's decisions (the cells that saw another face), then the saturation
-    run_rows(_decided_rows, z.shape[0], decisions, 1 if halved else 0, DECIDED_MAP,
-             SATURATION, unc, min_rows=16)
+        run_rows(_upsample_rows, z.shape[0], grid, edges, far, z, decisions, DECIDED_MAP,
+                 SATURATION, unc, min_rows=16)
     return out, unc
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _decided_rows(v0, v1, dec, shift, params, sat, out):
-    """Rows ``[v0, v1)`` of the measured support's map ``out`` (pixels): where the pixel's
-    cell (``(v >> shift, u >> shift)``) saw another face (the face switch's decisions ``dec``:
-    ``L = log(other / same)`` and the angle ``theta`` to the other face, NaN elsewhere), at
-    least ``P theta + (1 - P) e_r`` with ``P = a / (1 + (L / s)^2)`` (``s`` by the sign of
-    ``L``), and at least ``keep`` times what it was; then every pixel ``x / (1 + x / sat)``
-    (:data:`DECIDED_MAP`, :data:`SATURATION`); NaN stays NaN."""
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _decided_cells(lr, tr, params, floor, fac, top):
+    """One row of cells of the face switch's decisions (``L = log(other / same)`` in ``lr``,
+    the angle ``theta`` to the other face in ``tr``, NaN where the cell saw no other face)
+    into what :func:`_decide` reads per pixel: ``floor = P theta + (1 - P) e_r`` with ``P = a /
+    (1 + (L / s)^2)`` (``s`` by the sign of ``L``; -inf where not examined), ``fac = keep`` (1)
+    and ``top`` the cap (inf) (:data:`DECIDED_MAP` ``= (a, s_neg, s_pos, e_r, keep)``).
+    Branch-free: a cell that saw no other face keeps its map."""
     a, s_neg, s_pos, e_r, keep = params
     f32 = np.float32
-    w = out.shape[1]
-    wc = dec.shape[2]
-    isat = f32(1.0 / sat)
     cap = f32(MAX_ERROR)
-    floor = np.empty(wc, dtype=f32)  # per cell: the floor (-inf: not examined), the factor
-    fac = np.empty(wc, dtype=f32)  # and the cap (inf: not examined)
-    top = np.empty(wc, dtype=f32)
-    for v in range(v0, v1):
-        o = out[v]
-        lr = dec[0, v >> shift]
-        tr = dec[1, v >> shift]
-        for c in range(wc):  # branch-free: a cell that saw no other face keeps its map
-            L = lr[c]
-            seen = L == L
-            s = s_neg if L < 0.0 else s_pos
-            q = L / s
-            p = a / (1.0 + q * q)
-            m = f32(p * tr[c] + (1.0 - p) * e_r)
-            floor[c] = m if seen else f32(-np.inf)
-            fac[c] = f32(keep) if seen else f32(1.0)
-            top[c] = cap if seen else f32(np.inf)
-        for u in range(w):
-            x = o[u]
-            m = floor[u >> shift]
-            k = fac[u >> shift] * x
-            x = m if m > k else k  # NaN stays NaN (k is NaN, and NaN > m is false)
-            t = top[u >> shift]
-            x = t if x > t else x
-            o[u] = x / (f32(1.0) + x * isat)
+    for c in range(lr.size):
+        L = lr[c]
+        seen = L == L
+        s = s_neg if L < 0.0 else s_pos
+        q = L / s
+        p = a / (1.0 + q * q)
+        m = f32(p * tr[c] + (1.0 - p) * e_r)
+        floor[c] = m if seen else f32(-np.inf)
+        fac[c] = f32(keep) if seen else f32(1.0)
+        top[c] = cap if seen else f32(np.inf)
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _decide(x, m, f, t, isat):
+    """A pixel's map ``x`` after its cell's decision (:func:`_decided_cells`: at least the
+    floor ``m`` and ``f x``, at most ``t``), then ``x / (1 + x isat)`` (the saturation); NaN
+    stays NaN (``f x`` is NaN, and ``NaN > m`` is false)."""
+    k = f * x
+    x = m if m > k else k
+    x = t if x > t else x
+    return x / (np.float32(1.0) + x * isat)
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -1419,35 +1422,46 @@ def _capped_max3(a, b, c, cap):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _floor_rows(v0, v1, edges, out):
+def _floor_rows(v0, v1, edges, dec, params, sat, out):
     """Rows ``[v0, v1)`` of the map ``out`` on the pixel grid: at least the largest of the
     pixel's four edges (:func:`_cell_edges_rows`, :data:`CREASE_FLOOR`; 0 unless the pixel and
-    its neighbour both fell back), at most :data:`MAX_ERROR`; NaN stays NaN."""
+    its neighbour both fell back), at most :data:`MAX_ERROR`; then the face switch's decision
+    of the pixel's cell (``dec`` (2, H, W), NaN where it saw no other face; ``params``
+    :data:`DECIDED_MAP`; :func:`_decided_cells`) and the saturation ``x / (1 + x / sat)``
+    (:data:`SATURATION`); NaN stays NaN."""
     w = out.shape[1]
     f32 = np.float32
     left = np.empty(w, dtype=f32)
     above = np.empty(w, dtype=f32)
     four = np.empty(w, dtype=f32)
+    floor = np.empty(w, dtype=f32)
+    fac = np.empty(w, dtype=f32)
+    top = np.empty(w, dtype=f32)
     cap = f32(MAX_ERROR)
+    isat = f32(1.0 / sat)
     for v in range(v0, v1):
         _edge_rows(edges, v, left, above)
         _four_max_into(edges[0, v], left, edges[1, v], above, f32(1.0), four)
+        _decided_cells(dec[0, v], dec[1, v], params, floor, fac, top)
         o = out[v]
         for u in range(w):
             e = four[u] if four[u] < cap else cap
             m = o[u]
-            o[u] = e if e > m else m  # NaN > e is false: NaN stays
+            m = e if e > m else m  # NaN > e is false: NaN stays
+            o[u] = _decide(m, floor[u], fac[u], top[u], isat)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _upsample_rows(v0, v1, coarse, edges, far, z, out):
+def _upsample_rows(v0, v1, coarse, edges, far, z, dec, params, sat, out):
     """Rows ``[v0, v1)``: ``out[v, u] = coarse[v // 2, u // 2]``, at least the crease floor of
     that cell's edges (:func:`_cell_edges_rows`, 0 unless both cells across fell back; those
     the pixel lies on, the left or right and the upper or lower by the parity of ``u`` and
     ``v``, whole, the other two times ``far``; :data:`CREASE_FLOOR`), at most
     :data:`MAX_ERROR`; NaN where the depth ``z`` is (the branch's normal is NaN exactly there
-    and where its cell's is, whose ``coarse`` is NaN). Every pixel loop runs along a row,
-    without a branch (``x - x`` is 0, or NaN where the depth ``x`` is)."""
+    and where its cell's is, whose ``coarse`` is NaN); then the face switch's decision of
+    the cell (``dec`` (2, H / 2, W / 2), as :func:`_floor_rows`) and the saturation. Every
+    pixel loop runs along a row, without a branch (``x - x`` is 0, or NaN where the depth
+    ``x`` is)."""
     w = out.shape[1]
     wc = coarse.shape[1]
     h2 = w >> 1
@@ -1457,6 +1471,10 @@ def _upsample_rows(v0, v1, coarse, edges, far, z, out):
     left = np.empty(wc, dtype=f32)
     above = np.empty(wc, dtype=f32)
     cell = np.empty(wc, dtype=f32)  # the cell's floor from all four edges, times far
+    floor = np.empty(wc, dtype=f32)  # the cells' decisions (_decided_cells)
+    fac = np.empty(wc, dtype=f32)
+    top = np.empty(wc, dtype=f32)
+    isat = f32(1.0 / sat)
     i_prev = -1
     for v in range(v0, v1):
         i = v >> 1
@@ -1466,6 +1484,7 @@ def _upsample_rows(v0, v1, coarse, edges, far, z, out):
         if i != i_prev:
             _edge_rows(edges, i, left, above)
             _four_max_into(r, left, b, above, wf, cell)
+            _decided_cells(dec[0, i], dec[1, i], params, floor, fac, top)
             i_prev = i
         side = b if v & 1 else above  # the horizontal edge the pixel's row lies on
         zr = z[v]
@@ -1478,12 +1497,14 @@ def _upsample_rows(v0, v1, coarse, edges, far, z, out):
             fc = cell[j]
             e0 = _capped_max3(left[j], s, fc, cap)
             e1 = _capped_max3(r[j], s, fc, cap)
-            o[2 * j] = (e0 if e0 > cj else cj) + (x - x)  # NaN cj stays NaN
-            o[2 * j + 1] = (e1 if e1 > cj else cj) + (y - y)
+            m, f, t = floor[j], fac[j], top[j]
+            o[2 * j] = _decide((e0 if e0 > cj else cj) + (x - x), m, f, t, isat)  # NaN stays
+            o[2 * j + 1] = _decide((e1 if e1 > cj else cj) + (y - y), m, f, t, isat)
         if w & 1:
             x = zr[w - 1]
             e0 = _capped_max3(left[h2], side[h2], cell[h2], cap)
-            o[w - 1] = (e0 if e0 > c[h2] else c[h2]) + (x - x)
+            o[w - 1] = _decide((e0 if e0 > c[h2] else c[h2]) + (x - x), floor[h2], fac[h2],
+                               top[h2], isat)
 
 
 def _clean_branch(z, cam, sigma):
