@@ -865,15 +865,45 @@ def test_box_fit_ramp_and_high_factor():
     m = np.array([[1.0, 8.0, 10.0, 12.0, 40.0, np.nan, 20.0]], np.float32)
     e = np.array([[0.1, 0.1, 0.1, 0.1, 0.1, 0.1, 5.0]], np.float32)  # the last one high
     out = m.copy()
-    U._box_final_rows(0, 1, e, 1.0, out)
+    U._box_final_rows(0, 1, e, 1.0, 1.0, out)
     hi = 20.0 * U.BOX_HIGH[1]
     want = [1.0, 8.0, 10.0 * 1.125, 15.0, 50.0, np.nan,
             hi * (1.0 + a * min(1.0, max(0.0, (hi - m0) / (m1 - m0))))]
     np.testing.assert_allclose(out[0], want, rtol=1e-6)
     ramp = np.linspace(0.0, 60.0, 601, dtype=np.float32)[None]
     r = ramp.copy()
-    U._box_final_rows(0, 1, np.zeros_like(ramp), 1.0, r)
+    U._box_final_rows(0, 1, np.zeros_like(ramp), 1.0, 1.0, r)
     assert np.all(np.diff(r[0]) > 0)  # monotone: the ranking is unchanged
+    scaled = m.copy()  # the excess's scale multiplies after the ramp, then the cap
+    U._box_final_rows(0, 1, e, 1.0, 1.5, scaled)
+    np.testing.assert_allclose(scaled[0], np.minimum(1.5 * np.array(want), U.MAX_ERROR),
+                               rtol=1e-6)
+
+
+def test_box_map_grows_with_the_measured_excess(monkeypatch):
+    """The box-fit branch's map is linear in the excess of the measured fit error over the
+    i.i.d. prediction: ``e`` carries it at the power 3/8 (the product), the last factor at
+    :data:`BOX_EXCESS` (session 32: the tof model's frames, excess 1.1-1.8, under-read 1.13-1.24x
+    everywhere without it), so where no ramp applies the map at an excess ``x`` is
+    ``x^(3/8 + BOX_EXCESS)`` times the map at 1; the normals do not change."""
+    from depthnormals.analytic import make_scene
+    from depthnormals.ddm import uncertainty as U
+
+    assert U.BOX_EXCESS == 0.5
+    K = (300.0, 300.0, 159.5, 119.5)
+    r = make_scene("box-on-floor").render(K=K, shape=(240, 320))
+    rng = np.random.default_rng(4)
+    d = (r.depth * (1.0 + 0.002 * rng.standard_normal(r.depth.shape))).astype(np.float32)
+    maps = {}
+    for x in (1.0, 1.69):
+        monkeypatch.setattr(U, "_excess_at", lambda prof, radius, x=x: x)
+        n, u = dn.estimate_normals(d, K, return_uncertainty=True)
+        maps[x] = (n, u)
+    np.testing.assert_array_equal(maps[1.0][0], maps[1.69][0])
+    u1, u2 = maps[1.0][1], maps[1.69][1]
+    low = np.isfinite(u1) & (u1 < 0.5 * U.BOX_RAMP[1])  # below the ramp, also once scaled
+    assert low.mean() > 0.5
+    np.testing.assert_allclose(u2[low] / u1[low], 1.69 ** (3 / 8 + U.BOX_EXCESS), rtol=1e-4)
 
 
 def test_box_product_is_linear_in_the_noise_and_weights_the_far_spread():

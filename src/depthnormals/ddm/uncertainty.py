@@ -38,7 +38,9 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
   :data:`BOX_MAP`): where the window choice flips between surfaces the error is a wrong
   window, not noise, and the spreads see it; above about 10 deg a monotone ramp raises the
   map by up to a quarter (:data:`BOX_RAMP`: there the error is mostly a wrong window, whose
-  mean the product under-predicts);
+  mean the product under-predicts), and last the map is multiplied by the square root of that
+  excess (:data:`BOX_EXCESS`: the spreads, measured between neighbouring normals, miss the
+  error a blur gives neighbouring windows alike);
 - **the measured support** (``support_select``), self-calibrated on the frame: the level
   ``e_I`` is the mean error of the branch's own output normals in plane interiors, from the
   median angle of interior pixel pairs :data:`SPAN` large-window radii apart
@@ -289,6 +291,18 @@ MEDIAN_STEP = 7
 #: Session 15: ``m1`` 16 -> 12 with ``C`` (:data:`BOX_MAP`) on seeds 0 and 2 (loss of the
 #: squared log bin ratios 0.157 -> 0.127; a 0.15-0.45, m0 6-10, m1 12-24, C 0.96-1.08).
 BOX_RAMP = (0.25, 8.0, 12.0)
+#: Box-fit branch, after the ramp: the map times ``x^BOX_EXCESS``, ``x`` the excess of the fit
+#: error measured on the depth over the i.i.d. prediction at the box radius (:func:`_excess_at`,
+#: 1-2 on this branch: over :data:`depthnormals.ddm.auto.EXCESS` the measured support takes
+#: the frame). The product reads the excess only through ``e`` (power 3/8); its spreads,
+#: measured between normals a few pixels apart, do not see the part of the error that the
+#: depth's correlation (a blur) gives neighbouring windows alike. Session 32 (docs/benchmarks.md
+#: 23): on the tof model's frames (excess 1.08-1.81) the map under-read every range of its
+#: predictions by 1.13-1.24x, the plane interiors included, on the procedural set and both
+#: preset seeds; 0.375-0.625 pass every decile of the three tof columns (5/8 would make the map
+#: linear in the excess, and reads the procedural decile 9 at 0.77), 0.5 the middle; kinect_v2
+#: and gaussian frames read an excess of 1.00-1.06 and barely move.
+BOX_EXCESS = 0.5
 #: The box-fit branch reads its jump and step densities on every ``2^BOX_SUB``-th row and
 #: column (full resolution); the measured support's map grid is already every second one.
 BOX_SUB = 1
@@ -652,10 +666,11 @@ def _box_product(er, s1r, s3r, jr, sr, out):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _box_final_rows(v0, v1, e0, e_high, out):
+def _box_final_rows(v0, v1, e0, e_high, scale, out):
     """Rows ``[v0, v1)`` of the box-fit branch's map ``out``, last: times ``BOX_HIGH[1]``
     where the noise error ``e0`` exceeds ``e_high`` (:data:`BOX_HIGH`: the large window
-    refused), then the ramp :data:`BOX_RAMP`, at most :data:`MAX_ERROR` (NaN stays NaN)."""
+    refused), then the ramp :data:`BOX_RAMP`, times ``scale`` (the frame's excess to the power
+    :data:`BOX_EXCESS`), at most :data:`MAX_ERROR` (NaN stays NaN)."""
     f32 = np.float32
     cap = f32(MAX_ERROR)
     hi = f32(e_high)
@@ -663,6 +678,7 @@ def _box_final_rows(v0, v1, e0, e_high, out):
     a = f32(BOX_RAMP[0])
     m0 = f32(BOX_RAMP[1])
     inv = f32(1.0 / (BOX_RAMP[2] - BOX_RAMP[1]))
+    sc = f32(scale)
     for v in range(v0, v1):
         er = e0[v]
         o = out[v]
@@ -671,7 +687,7 @@ def _box_final_rows(v0, v1, e0, e_high, out):
             t = (m - m0) * inv
             t = t if t > f32(0.0) else f32(0.0)
             t = t if t < f32(1.0) else f32(1.0)
-            m = m * (f32(1.0) + a * t)
+            m = m * (f32(1.0) + a * t) * sc
             o[u] = cap if m > cap else m
 
 
@@ -1240,7 +1256,8 @@ def _box_branch(z, cam, sigma, levels, prof):
                                 sigma_tiles=(t, TILE), out_scores=scores)
     score, big_s = scores
     e0, var, tile = _tile_maps(z, fx, fy, sigma, r, levels, NOISE_CLEAN)
-    tiles = (e0 * _excess_at(prof, r), var, tile)
+    excess = _excess_at(prof, r)
+    tiles = (e0 * excess, var, tile)
     bigs = (big_s, GATE, math.sqrt(_full_suu(r) / _full_suu(big))) if big > r else None
     unc = np.empty(z.shape, dtype=np.float32)
     box = (_densities(z, big, BOX_SUB), BOX_SUB, unc, NEAR_SPAN)
@@ -1248,7 +1265,8 @@ def _box_branch(z, cam, sigma, levels, prof):
     sub = e0[::MEDIAN_STEP, ::MEDIAN_STEP]
     sub = sub[np.isfinite(sub)]
     med = max(float(np.median(sub)) if sub.size else 1.0, 1e-6)
-    run_rows(_box_final_rows, z.shape[0], e0, BOX_HIGH[0] * med, unc, min_rows=16)
+    run_rows(_box_final_rows, z.shape[0], e0, BOX_HIGH[0] * med, excess ** BOX_EXCESS, unc,
+             min_rows=16)
     return out, unc
 
 
