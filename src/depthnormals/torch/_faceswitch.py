@@ -54,13 +54,10 @@ def switch_faces(z: torch.Tensor, n: tuple, cam, span: int) -> tuple:
         zg = torch.where(good, z, torch.zeros_like(z))
         u = torch.arange(w, dtype=z.dtype, device=dev).reshape(1, 1, w)
         v = torch.arange(h, dtype=z.dtype, device=dev).reshape(1, h, 1)
-        x = (u - cx) / fx * zg
+        x = (u - cx) / fx * zg  # 0 where not good, as zg
         y = (v - cy) / fy * zg
-        x = torch.where(good, x, torch.zeros_like(x))
-        y = torch.where(good, y, torch.zeros_like(y))
-        zz = zg
-        ch = torch.stack((good.to(z.dtype), x, y, zz, x * x, x * y, x * zz, y * y, y * zz,
-                          zz * zz))
+        ch = torch.stack((good.to(z.dtype), x, y, zg, x * x, x * y, x * zg, y * y, y * zg,
+                          zg * zg))
         s = _sum3(ch)
         ic = 1.0 / s[0]
         p = [s[1] * ic, s[2] * ic, s[3] * ic]
