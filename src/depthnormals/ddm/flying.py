@@ -4,11 +4,12 @@ A sensor that averages light or depth over a pixel's footprint (a time-of-flight
 renderer that supersamples, a blurring filter) returns, where a surface occludes another, pixels
 whose depth lies between the two: the mixed or flying pixels (Reynolds et al., "Capturing
 Time-of-Flight data with confidence", CVPR 2011; Fankhauser et al., "Kinect v2 for mobile robot
-navigation", ICAR 2015). A depth that samples one ray per pixel (a ray caster, a structured-light
-matcher that keeps the winning disparity) steps from one surface to the other between two
-neighbours. Which of the two a frame holds changes what a jump does to the windows beside it: a
-mixed pixel is an outlier of the size of the jump in every window that holds it, while a clean
-step leaves each side's windows a plane of their own that the window shift finds.
+navigation", ICAR 2015); so does a depth resampled by interpolation (registered to another
+camera). A depth that samples one ray per pixel (a ray caster) steps from one surface to the
+other between two neighbours. Which of the two a frame holds changes what a jump does to the
+windows beside it: a mixed pixel is an outlier of the size of the jump in every window that
+holds it, while a clean step leaves each side's windows a plane of their own that the window
+shift finds.
 
 :func:`mixed_share` reads it off the depth alone: among the one-pixel jumps along rows and
 columns (five consecutive valid depths ``p0 .. p4`` where ``p1`` and ``p3`` differ by more than
@@ -20,8 +21,8 @@ two windows whose middle pixel lies on either side, each counting a half. Median
 synthetic benchmark's frames (procedural seed 5, 80 a model; 10th-90th percentiles): clean and
 Gaussian renders 0.012 (0-0.11), Kinect v2 (3x3 supersampled pixels) 0.69 (0.53-0.97), time
 of flight 0.73 (0.58-1.0), realsense 0.85 (0.45-0.97), Kinect v1 0.27 (0.02-0.87); the real
-frames of ``shared/data/real-sensors`` 0.11-0.19 (TUM's Kinect v1), 0.45-0.75 (NYU, SUN
-RGB-D), 0.95 (KITTI's lidar).
+frames of ``shared/data/real-sensors`` 0.11-0.19 (TUM's Kinect v1), 0.45-0.75 (NYU and SUN
+RGB-D, registered to the colour camera), 0.95 (KITTI's lidar, projected into the image).
 """
 
 from __future__ import annotations
