@@ -685,12 +685,13 @@ def _box_product(er, s1r, s3r, jr, sr, clean, out):
         x3 = s3r[u] if s3r[u] > fl else fl
         p = _ipow(e, k[0]) * _ipow(x1, k[1]) * _ipow(x3, k[2])
         p *= _ipow(f32(STEP_OFFSET) + sr[u], k[3])
-        m = f32(BOX_MAP[0]) * _root8(p)
-        t = (m - t0) * inv
+        r = _root8(p)
+        t = (f32(BOX_MAP[0]) * r - t0) * inv
         t = t if t > f32(0.0) else f32(0.0)
         t = t if t < f32(1.0) else f32(1.0)
-        wt = f32(1.0) - c * (f32(1.0) - t)
-        out[u] = m * (f32(1.0) + f32(BOX_MAP[1]) * jr[u] * wt)
+        wt = f32(1.0) - c * (f32(1.0) - t)  # 1 on a frame of mixed jumps: the map as before
+        g = f32(BOX_MAP[0]) * (f32(1.0) + f32(BOX_MAP[1]) * jr[u] * wt)
+        out[u] = g * r
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
