@@ -183,7 +183,7 @@ def test_the_default_on_a_kinect_crease_improves():
 
 
 def test_log_acos_equal_libm_once_rounded_to_float32():
-    """The decisions' logarithm and arc cosine, computed in loops the compiler vectorises
+    """The decisions' logarithm and arc cosine, computed in loops without a call or a branch
     (series on the mantissa and on the half angle), agree with libm within a few units in
     the last place of float64, hence equal once stored as float32; zeros, infinities, NaN and
     cosines past +-1 (clipped) as libm reads them."""
