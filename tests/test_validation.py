@@ -208,6 +208,26 @@ def test_one_pixel(method):
     assert np.isnan(n).all()  # one point has no normal
 
 
+@pytest.mark.parametrize("method", ["pcl-covariance-matrix", "pcl-average-3d-gradient"])
+def test_all_nan_from_the_methods_own_rules_says_so(method):
+    """Every pixel valid, each with four valid neighbours, but the depth alternates 1 m and 2 m
+    like a chessboard: PCL's depth-change limit refuses every neighbourhood. The warning must
+    not claim that no pixel has a valid neighbour (it did, misleading the user to the wrong
+    fix); isolated pixels still get that message."""
+    z = np.where(np.indices((12, 16)).sum(0) % 2 == 0, 1.0, 2.0)
+    with pytest.warns(dn.NoValidNormalWarning) as rec:
+        n = dn.estimate_normals(z, K, method=method)
+    assert np.isnan(n).all()
+    msg = str(rec[0].message)
+    assert "192 valid pixel(s) of 192, 192 with a valid neighbour" in msg
+    assert "refused every neighbourhood" in msg and "none has a valid" not in msg
+    iso = np.zeros((12, 16))
+    iso[2, 3] = iso[5, 7] = iso[4, 9] = 1.5  # no two adjacent along a row or a column
+    with pytest.warns(dn.NoValidNormalWarning, match="3 valid pixel.s. of 192, but none has a valid "
+                                                    "neighbour"):
+        dn.estimate_normals(iso, K, method=method)
+
+
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("shape", [(2, 2), (3, 3), (1, 5), (5, 1), (2, 7)])
 def test_tiny_images(method, shape):

@@ -18,19 +18,36 @@ class NoValidNormalWarning(RuntimeWarning):
     One policy for all-NaN output (docs/conventions.md, "Errors and exit status"): the API
     returns the all-NaN array and warns with this category; the command line writes it and
     exits with status 3. It happens when no depth pixel is valid (all 0, negative, NaN or
-    inf: often a missing ``depth_scale`` or a wrong file) and when no valid pixel has a valid
-    neighbour (a 1x1 image, isolated points).
+    inf: often a missing ``depth_scale`` or a wrong file), when no valid pixel has a valid
+    neighbour (a 1x1 image, isolated points), and when the method's own rules refuse every
+    neighbourhood (PCL's depth-change limit on depth that jumps between all neighbours); the
+    message says which.
     """
 
 
 def no_valid_normal_message(depth: np.ndarray, what: str = "the depth") -> str:
     """Why an output holds no finite normal, for :class:`NoValidNormalWarning` and the CLI."""
-    valid = int(np.count_nonzero(np.isfinite(depth) & (depth > 0)))
+    ok = np.isfinite(depth) & (depth > 0)
+    valid = int(np.count_nonzero(ok))
     if valid == 0:
         return (f"no pixel of {what} holds a valid depth (all are 0, negative, NaN or inf), so "
                 "every normal is NaN; check the file, the depth scale and the image shape")
-    return (f"{what} has {valid} valid pixel(s) of {depth.size}, but none has a valid neighbour "
-            f"({depth.shape[0]} x {depth.shape[1]} pixels), so every normal is NaN")
+    paired = np.zeros(ok.shape, dtype=bool)  # valid pixels with a valid 4-neighbour
+    if ok.ndim == 2:
+        across = ok[:, 1:] & ok[:, :-1]
+        down = ok[1:] & ok[:-1]
+        paired[:, 1:] |= across
+        paired[:, :-1] |= across
+        paired[1:] |= down
+        paired[:-1] |= down
+    shape = f"{depth.shape[0]} x {depth.shape[1]} pixels"
+    if not paired.any():
+        return (f"{what} has {valid} valid pixel(s) of {depth.size}, but none has a valid "
+                f"neighbour ({shape}), so every normal is NaN")
+    return (f"{what} has {valid} valid pixel(s) of {depth.size}, {int(paired.sum())} with a valid "
+            f"neighbour ({shape}), but the method's own rules refused every neighbourhood (a "
+            "depth-change limit, as PCL's, where the depth jumps between neighbours everywhere; "
+            "too few valid pixels in its windows), so every normal is NaN")
 
 
 def check_positive(value: Any, name: str, *, allow_none: bool = False) -> float | None:

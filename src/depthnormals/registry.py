@@ -259,7 +259,8 @@ def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
         if empty:
             shown = ", ".join(map(str, empty[:10])) + (", ..." if len(empty) > 10 else "")
             warnings.warn(f"{len(empty)} of {out.shape[0]} frames of the stack hold no finite normal "
-                          f"(frames {shown}): no valid depth, or no valid pixel with a valid neighbour",
+                          f"(frames {shown}): no valid depth, no valid pixel with a valid neighbour, "
+                          "or the method's own rules refused every neighbourhood",
                           NoValidNormalWarning, stacklevel=2)
         return result
     if return_uncertainty:
