@@ -1,10 +1,12 @@
 """Small shared fixtures: the shared data folder, the 3F2N torus-knot frame, a rough
-analytic scene for the fast-path equivalence tests, and a loader of the benchmark scripts."""
+analytic scene for the fast-path equivalence tests, a loader of the benchmark scripts and a
+depth whose 3F2N normal is perpendicular to its ray (the orientation's tie)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -86,3 +88,19 @@ def two_threads():
     dn.set_num_threads(2)
     yield
     dn.set_num_threads(old)
+
+
+def tie_depth(v: int, u: int = 4, shape=(42, 8)) -> np.ndarray:
+    """Depth whose 3F2N normal at (v, u) is exactly perpendicular to the pixel's ray: left,
+    up-left and up-right invalid, the pixel above and the one below-left 1 cm nearer, the rest
+    level with it. The horizontal gradient is 0 and the median of the two candidates (their
+    mean) makes ``n_z = -n_y (v - cy) / fy``, so ``n . ray = 0``: its sign is rounding (on
+    quantised Kinect depth hundreds of pixels a frame are such ties)."""
+    z = np.full(shape, 2.1)
+    z[v, u - 1] = z[v - 1, u - 1] = z[v - 1, u + 1] = 0.0
+    z[v - 1, u] = z[v + 1, u - 1] = 2.09
+    return z
+
+
+#: The intrinsics of :func:`tie_depth`.
+TIE_K = (300.0, 300.0, 3.5, 20.25)

@@ -254,3 +254,18 @@ def test_truth_of_scene_faces_camera():
     ok = np.isfinite(r.normals).all(axis=-1)
     pts = dn.backproject(r.depth, r.K)
     assert ok.any() and (np.einsum("...i,...i->...", r.normals, pts)[ok] < 0).all()
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_normal_perpendicular_to_its_ray_takes_minus_z(dtype):
+    """The orientation's tie rule (docs/conventions.md, kernels.orient.TIE_COS): a normal
+    perpendicular to its viewing ray faces neither way; it takes n_z < 0. Before the rule 19
+    (float64) and 20 (float32) of these 38 rows faced +z-ward by rounding (and the torch
+    backend, by its own rounding, often the other way: 180 deg apart)."""
+    from conftest import TIE_K, tie_depth
+
+    for v in range(2, 40):
+        n = dn.estimate_normals(tie_depth(v).astype(dtype), TIE_K, method="3f2n")[v, 4]
+        ray = np.array([(4 - TIE_K[2]) / TIE_K[0], (v - TIE_K[3]) / TIE_K[1], 1.0])
+        assert abs(n.astype(np.float64) @ ray) < 1e-6 * np.linalg.norm(ray)  # a tie
+        assert n[2] < 0 and abs(n[1]) > 0.99, (v, n)

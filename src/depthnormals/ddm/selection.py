@@ -18,7 +18,7 @@ import numba as nb
 import numpy as np
 
 from .._parallel import run_rows
-from ..kernels.depth import C_FX, C_FY, C_INF, C_MAX, C_ONE, C_ZERO, Pinhole, row_arrays
+from ..kernels.depth import C_FX, C_FY, C_INF, C_MAX, C_ONE, C_TIE2, C_ZERO, Pinhole, row_arrays
 from ..kernels.orient import store_nan, store_normal
 
 __all__ = ["CROSS", "SQUARE", "clamp_key", "cross_select_row", "inconsistency", "inconsistency_pq",
@@ -208,6 +208,8 @@ def _cross_select(z3, n3, k3, acol, b, c, selfw, eps, out_row, test):
     ifx = one / fx
     ify = one / c[C_FY]
     bfy = b * ify
+    tie2 = c[C_TIE2]
+    p2y = one + bfy * bfy
     for u in range(bx.size):
         i = u + 1
         zq = zc[i]
@@ -252,9 +254,15 @@ def _cross_select(z3, n3, k3, acol, b, c, selfw, eps, out_row, test):
         xr = nx[i]
         k, x, y, t = _pick(_key(kn[i], xr if zn[i] == zn[i] else nan, big, inf), k, ok4, xr,
                            ny[i], nz[i], x, y, t)
-        nrm = np.sqrt(x * x + y * y + t * t)
+        n2 = x * x + y * y + t * t
+        nrm = np.sqrt(n2)
         inv = one / nrm
-        inv = -inv if x * (A * ifx) + y * bfy + t > zero else inv
+        ax = A * ifx
+        dot = x * ax + y * bfy + t
+        # perpendicular to the ray: n_z, n_y, n_x decide (kernels.orient.faces_away)
+        key = t if t != zero else (y if y != zero else x)
+        tie = dot * dot <= tie2 * n2 * (ax * ax + p2y)
+        inv = -inv if (key > zero if tie else dot > zero) else inv
         inv = inv if (zq == zq) & (k < inf) else nan
         bx[u] = x * inv
         by[u] = y * inv
@@ -284,7 +292,7 @@ def cross_select_row(z3, n3, k3, acol, b, c, selfw, eps, out_row):
     key is strictly smaller and (``eps >= 0``) it passes the consistency test against the
     pixel's own normal. The winner is renormalised and turned toward the camera; NaN where
     none or where the pixel's depth is invalid. ``c``: the constants row of
-    :func:`depthnormals.kernels.depth.row_arrays` (slots ``C_ONE`` .. ``C_MAX``).
+    :func:`depthnormals.kernels.depth.row_arrays` (slots ``C_ONE`` .. ``C_TIE2``).
     """
     if eps >= 0.0:
         _cross_consistent(z3, n3, k3, acol, b, c, selfw, eps, out_row)

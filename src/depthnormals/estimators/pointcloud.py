@@ -13,7 +13,7 @@ import numpy as np
 from .._parallel import run_rows
 from ..kernels.depth import prepare
 from ..kernels.eig3 import smallest_eigenvector, smallest_eigenvector_newton
-from ..kernels.orient import store_normal
+from ..kernels.orient import faces_away, store_normal
 
 __all__ = ["angle_weighted", "area_weighted", "plane_pca", "plane_svd", "vector_svd"]
 
@@ -148,9 +148,11 @@ def _scatter3_row(zp, zc, zn, v, fx, fy, cx, cy, centred, bx, by, bz, flag):
             syz -= sy * sz * inv
             szz -= sz * sz * inv
         nx, ny, nz, ok = smallest_eigenvector_newton(sxx, sxy, sxz, syy, syz, szz)
-        nrm = math.sqrt(nx * nx + ny * ny + nz * nz)  # as store_normal: renormalise, orient
+        n2 = nx * nx + ny * ny + nz * nz
+        nrm = math.sqrt(n2)  # as store_normal: renormalise, orient
         inv = 1.0 / nrm
-        inv = -inv if nx * xq + ny * yq + nz * zq > 0.0 else inv
+        p2 = xq * xq + yq * yq + zq * zq
+        inv = -inv if faces_away(nx * xq + ny * yq + nz * zq, n2, p2, nx, ny, nz) else inv
         bx[u] = nx * inv
         by[u] = ny * inv
         bz[u] = nz * inv
@@ -326,9 +328,11 @@ def _fan_row(zp, zc, zn, v, fx, fy, cx, cy, angle, bx, by, bz, flag):
         sx, sy, sz, good = _tri(d5x, d5y, d5z, d6x, d6y, d6z, angle, sx, sy, sz, good)
         sx, sy, sz, good = _tri(d6x, d6y, d6z, d7x, d7y, d7z, angle, sx, sy, sz, good)
         sx, sy, sz, good = _tri(d7x, d7y, d7z, d0x, d0y, d0z, angle, sx, sy, sz, good)
-        nrm = math.sqrt(sx * sx + sy * sy + sz * sz)
+        n2 = sx * sx + sy * sy + sz * sz
+        nrm = math.sqrt(n2)
         inv = 1.0 / nrm
-        inv = -inv if sx * xq + sy * yq + sz * zq > 0.0 else inv
+        p2 = xq * xq + yq * yq + zq * zq
+        inv = -inv if faces_away(sx * xq + sy * yq + sz * zq, n2, p2, sx, sy, sz) else inv
         bx[u] = sx * inv
         by[u] = sy * inv
         bz[u] = sz * inv

@@ -12,7 +12,7 @@ from .._parallel import run_rows
 from .._validate import check_positive
 from ..kernels.depth import new_output, prepare
 from ..kernels.eig3 import sym3_adjugate_apply
-from ..kernels.orient import store_normal
+from ..kernels.orient import faces_away, store_normal
 from ..kernels.stencils import gradient_kernels, stencil_derivative
 from .pointcloud import check_window
 
@@ -218,10 +218,11 @@ def _fals_solve_row(yq, acc, xs_, bx_, by_, bz_, flag_, lo, hi):
         m12 = a8[k]
         m22 = a9[k]
         nx, ny, nz, _ = sym3_adjugate_apply(m00, m01, m02, m11, m12, m22, s0, s1, s2)
-        nrm = math.sqrt(nx * nx + ny * ny + nz * nz)
+        n2 = nx * nx + ny * ny + nz * nz
+        nrm = math.sqrt(n2)
         inv = 1.0 / nrm
         dot = nx * xs[k] + ny * yq + nz  # dot(n, X) / z
-        inv = -inv if dot > 0.0 else inv
+        inv = -inv if faces_away(dot, n2, xs[k] * xs[k] + yq * yq + 1.0, nx, ny, nz) else inv
         bx[k] = nx * inv
         by[k] = ny * inv
         bz[k] = nz * inv
@@ -482,9 +483,10 @@ def _sri_fast_row(v, R, hd, deriv, smooth, iws, cam, work, out_row, out_flag):
         x = (k + m - cx) / fx
         rq = Rv[k]
         nx, ny, nz = _sri_normal(ru[k] * iws, rv[k] * iws, rq, x, y, fx, fy)
-        nrm = math.sqrt(nx * nx + ny * ny + nz * nz)
+        n2 = nx * nx + ny * ny + nz * nz
+        nrm = math.sqrt(n2)
         inv = 1.0 / nrm
-        inv = -inv if nx * x + ny * y + nz > 0.0 else inv
+        inv = -inv if faces_away(nx * x + ny * y + nz, n2, x * x + y * y + 1.0, nx, ny, nz) else inv
         bx[k] = nx * inv
         by[k] = ny * inv
         bz[k] = nz * inv

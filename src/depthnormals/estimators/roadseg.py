@@ -10,7 +10,7 @@ import numpy as np
 
 from .._parallel import run_rows
 from ..kernels.depth import prepare
-from ..kernels.orient import store_normal
+from ..kernels.orient import faces_away, store_normal
 from ..kernels.stencils import gradient_kernels, stencil_derivative
 from ..kernels.threefn_rows import NEIGHBOURS8, nz_candidates
 
@@ -107,9 +107,11 @@ def _roadseg_row(zp, zc, zn, Dc, Dp, Dn, v, fx, fy, cx, cy, bx, by, bz, flag):
         mx = nx if has else 0.0
         my = ny if has else 0.0
         mz = sz / sw if has else -1.0
-        nrm = math.sqrt(mx * mx + my * my + mz * mz)
+        n2 = mx * mx + my * my + mz * mz
+        nrm = math.sqrt(n2)
         inv = 1.0 / nrm
-        inv = -inv if mx * xq + my * yq + mz * zq > 0.0 else inv
+        p2 = xq * xq + yq * yq + zq * zq
+        inv = -inv if faces_away(mx * xq + my * yq + mz * zq, n2, p2, mx, my, mz) else inv
         bx[u] = mx * inv
         by[u] = my * inv
         bz[u] = mz * inv

@@ -15,9 +15,10 @@ import numpy as np
 
 from .._validate import check_depth
 from ..camera import Intrinsics, as_intrinsics
+from .orient import TIE_COS2
 
-__all__ = ["C_FX", "C_FY", "C_HALF", "C_INF", "C_MAX", "C_NINF", "C_ONE", "C_ZERO", "FLOAT32_RANGE",
-           "Pinhole", "new_output", "pinhole", "prepare", "row_arrays", "row_dtype"]
+__all__ = ["C_FX", "C_FY", "C_HALF", "C_INF", "C_MAX", "C_NINF", "C_ONE", "C_TIE2", "C_ZERO",
+           "FLOAT32_RANGE", "Pinhole", "new_output", "pinhole", "prepare", "row_arrays", "row_dtype"]
 
 
 def prepare(depth: Any, K: Any, depth_scale: float | None) -> tuple[np.ndarray, Intrinsics]:
@@ -67,22 +68,23 @@ def pinhole(cam: Intrinsics) -> Pinhole:
 
 
 #: Slots of the constants row ``c`` that :func:`row_arrays` returns (in the dtype of the
-#: depth, so the vectorised row passes never convert): 0.5, 1, +inf, -inf, 0, fx, fy and the
-#: dtype's largest finite float. Kernels read ``c[C_ONE]``, never ``c[1]``.
-C_HALF, C_ONE, C_INF, C_NINF, C_ZERO, C_FX, C_FY, C_MAX = range(8)
+#: depth, so the vectorised row passes never convert): 0.5, 1, +inf, -inf, 0, fx, fy, the
+#: dtype's largest finite float and the squared cosine of the orientation's tie
+#: (:data:`depthnormals.kernels.orient.TIE_COS2`). Kernels read ``c[C_ONE]``, never ``c[1]``.
+C_HALF, C_ONE, C_INF, C_NINF, C_ZERO, C_FX, C_FY, C_MAX, C_TIE2 = range(9)
 
 
 def row_arrays(z: np.ndarray, fx: float, fy: float, cx: float,
                cy: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Typed inputs of the row kernels, in the dtype of ``z`` (as :func:`row_dtype` gives it).
 
-    ``c``: the constants row (slots :data:`C_HALF` .. :data:`C_MAX`), ``acol[u] = u - cx``,
+    ``c``: the constants row (slots :data:`C_HALF` .. :data:`C_TIE2`), ``acol[u] = u - cx``,
     ``bcol[v] = v - cy``. Casting huge or tiny intrinsics to float32 only happens where the
     row passes are not used, so overflow and underflow are silent here.
     """
     h, w = z.shape
     with np.errstate(over="ignore", under="ignore"):
-        c = np.array([0.5, 1.0, np.inf, -np.inf, 0.0, fx, fy, np.finfo(z.dtype).max],
+        c = np.array([0.5, 1.0, np.inf, -np.inf, 0.0, fx, fy, np.finfo(z.dtype).max, TIE_COS2],
                      dtype=z.dtype)
         acol = (np.arange(w) - cx).astype(z.dtype)
         bcol = (np.arange(h) - cy).astype(z.dtype)

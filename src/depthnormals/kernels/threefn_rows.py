@@ -12,7 +12,7 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
-from .depth import C_FX, C_FY, C_HALF, C_INF, C_NINF, C_ONE, C_ZERO, row_arrays
+from .depth import C_FX, C_FY, C_HALF, C_INF, C_NINF, C_ONE, C_TIE2, C_ZERO, row_arrays
 from .orient import oriented_unit
 from .stencils import roberts_gradient, stencil_derivative
 
@@ -242,6 +242,9 @@ def _fd_row(z3, r3, up, down, eh, acol, b, c, mode, out_row, out_flag):
     zero = c[C_ZERO]
     fx = c[C_FX]
     fy = c[C_FY]
+    tie2 = c[C_TIE2]
+    iby = b / fy  # the ray (a / fx, b / fy, 1), for the orientation's tie
+    p2y = one + iby * iby
     w = zc.size
     for u in range(1, w - 1):
         zq = zc[u]
@@ -292,10 +295,16 @@ def _fd_row(z3, r3, up, down, eh, acol, b, c, mode, out_row, out_flag):
         nx = nx if has else zero
         ny = ny if has else zero
         nz = nz if has else -one
-        nrm = np.sqrt(nx * nx + ny * ny + nz * nz)
+        nrm2 = nx * nx + ny * ny + nz * nz
+        nrm = np.sqrt(nrm2)
         inv = one / nrm
         dot = gu * a + gv * b + nz if has else -one  # dot(n, X) / z
-        inv = -inv if dot > zero else inv
+        iax = a / fx
+        # perpendicular to the ray: n_z, n_y, n_x decide (orient.faces_away)
+        key = nz if nz != zero else (ny if ny != zero else nx)
+        tie = dot * dot <= tie2 * nrm2 * (p2y + iax * iax)
+        away = key > zero if tie else dot > zero
+        inv = -inv if away else inv
         bx[u] = nx * inv
         by[u] = ny * inv
         bz[u] = nz * inv

@@ -19,6 +19,7 @@ import torch
 import torch.nn.functional as F
 
 from ..camera import Intrinsics, as_intrinsics
+from ..kernels.orient import TIE_COS2
 
 __all__ = ["Camera", "Grid", "camera", "finish", "oriented", "prepare", "shift"]
 
@@ -178,9 +179,23 @@ def oriented(nx: torch.Tensor, ny: torch.Tensor, nz: torch.Tensor, cam: Camera,
     n2 = nx * nx + ny * ny + nz * nz
     ok = ok & (n2 > 0) & torch.isfinite(n2)
     inv = torch.rsqrt(torch.where(ok, n2, 1.0))
-    dot = nx * (cam.a / cam.fx) + ny * (cam.b / cam.fy) + nz
-    inv = torch.where(ok, torch.where(dot > 0, -inv, inv), 0.0)
+    rx = cam.a / cam.fx
+    ry = cam.b / cam.fy
+    dot = nx * rx + ny * ry + nz
+    away = faces_away(dot, n2, rx * rx + ry * ry + 1.0, nx, ny, nz)
+    inv = torch.where(ok, torch.where(away, -inv, inv), 0.0)
     return nx * inv, ny * inv, nz * inv, ok
+
+
+def faces_away(dot: torch.Tensor, n2: torch.Tensor, p2: torch.Tensor, nx: torch.Tensor,
+               ny: torch.Tensor, nz: torch.Tensor) -> torch.Tensor:
+    """Where the normal must be negated to face the camera: ``dot = n . X > 0``, but within
+    :data:`~depthnormals.kernels.orient.TIE_COS` of perpendicular to the ray (``n2``, ``p2``
+    the squared lengths of the normal and the ray) the first non-zero of ``n_z, n_y, n_x``
+    decides: the numba kernels' rule (:func:`depthnormals.kernels.orient.faces_away`)."""
+    key = torch.where(nz != 0, nz, torch.where(ny != 0, ny, nx))
+    tie = dot * dot <= TIE_COS2 * n2 * p2
+    return torch.where(tie, key > 0, dot > 0)
 
 
 def finish(nx: torch.Tensor, ny: torch.Tensor, nz: torch.Tensor, ok: torch.Tensor,
