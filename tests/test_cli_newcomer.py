@@ -276,6 +276,21 @@ def test_kernel_cache_state_follows_numba(tmp_path, monkeypatch):
     assert _firstrun.kernel_cache_state(pkg) == "stale"
 
 
+
+def test_kernel_cache_state_is_warm_for_the_package_once_compiled():
+    """The package's own kernels carry :mod:`depthnormals._numba_cache`'s stamp (numba's, paired
+    with the digest of the package's compiled code): once one is compiled and cached the state
+    is warm. Until session 34 the check compared numba's bare stamp, read every index of the
+    package as stale, and every command announced "compiling kernels, first run only" on every
+    run (since the stamp pair came in)."""
+    import numpy as np
+
+    import depthnormals as dn
+
+    dn.estimate_normals(np.full((8, 8), 2.0), (50.0, 50.0, 3.5, 3.5), method="3f2n")
+    assert _firstrun.kernel_cache_state() == "warm"
+
+
 # ---------------------------------------------------------------------------- pictures
 
 def test_demo_picture_has_titles_and_colour_bars(tmp_path, capsys):

@@ -5,7 +5,9 @@ index file ``<module>.<function>-<line>.py<XY>.nbi`` per kernel in the file's ca
 ``$NUMBA_CACHE_DIR/<folder>_<sha1 of the folder path>/`` when ``NUMBA_CACHE_DIR`` is set,
 else ``__pycache__`` beside the source (or numba's user-wide cache folder when that is not
 writable). An index is fresh when it was written by this numba version for the current source
-(numba stamps it with a hash of the file, or (mtime, size) in older versions).
+(numba stamps it with a hash of the file, or (mtime, size) in older versions; for the package's
+own kernels :mod:`depthnormals._numba_cache` pairs that stamp with the digest of the package's
+compiled code, and only that pair is fresh).
 
 :func:`kernel_cache_state` reads only those index files (a few ms): ``"warm"`` when some kernel
 module has a fresh index, else ``"stale"`` when indexes exist but none is fresh (the package
@@ -54,7 +56,12 @@ def _cache_dirs(py_file: Path) -> list[Path]:
     return dirs
 
 
-def _index_is_fresh(index: Path, source: bytes, stat: os.stat_result, version: str) -> bool:
+def _index_is_fresh(index: Path, source: bytes, stat: os.stat_result, version: str,
+                    package: str | None = None) -> bool:
+    """Whether numba would load the index: its version, and its source stamp numba's own
+    (a hash of the file, or (mtime, size)) or, for a folder whose stamp
+    :mod:`depthnormals._numba_cache` extends, that pair with the folder's compiled-code
+    digest ``package``."""
     try:
         with open(index, "rb") as fh:
             if pickle.load(fh) != version:
@@ -62,7 +69,20 @@ def _index_is_fresh(index: Path, source: bytes, stat: os.stat_result, version: s
             stamp = pickle.loads(fh.read())[0]
     except Exception:  # unreadable or from another numba: numba recompiles, so not fresh
         return False
-    return stamp in (hashlib.sha256(source).digest(), (stat.st_mtime, stat.st_size))
+    own = (hashlib.sha256(source).digest(), (stat.st_mtime, stat.st_size))
+    if package is not None:
+        return isinstance(stamp, tuple) and len(stamp) == 2 and stamp[0] in own \
+            and stamp[1] == package
+    return stamp in own
+
+
+def _package_digest(root: Path) -> str | None:
+    """The compiled-code digest :mod:`depthnormals._numba_cache` adds to the stamps of the
+    kernels under ``root`` (None where it adds none: a folder it does not know)."""
+    from .. import _numba_cache
+
+    deps = _numba_cache._ROOTS.get(root.resolve())
+    return None if deps is None else _numba_cache.compiled_code_digest(root.resolve(), deps)
 
 
 def kernel_cache_state(package_dir: str | Path | None = None) -> str:
@@ -83,6 +103,7 @@ def kernel_cache_state(package_dir: str | Path | None = None) -> str:
     import numba
 
     root = Path(package_dir) if package_dir is not None else Path(__file__).resolve().parents[1]
+    package = _package_digest(root)
     any_fresh = stale = False
     for module in _kernel_modules(root):
         indexes = [p for d in _cache_dirs(module) if d.is_dir()
@@ -90,7 +111,7 @@ def kernel_cache_state(package_dir: str | Path | None = None) -> str:
         if not indexes:
             continue
         source, stat = module.read_bytes(), module.stat()
-        if any(_index_is_fresh(p, source, stat, numba.__version__) for p in indexes):
+        if any(_index_is_fresh(p, source, stat, numba.__version__, package) for p in indexes):
             any_fresh = True
         else:
             stale = True

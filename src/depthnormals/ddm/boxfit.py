@@ -46,7 +46,7 @@ from .._parallel import run_rows
 from .._validate import check_int, check_real
 from ..kernels.depth import prepare
 from ..kernels.eig3 import sym3_adjugate_apply
-from ..kernels.orient import faces_away, store_nan, store_normal
+from ..kernels.orient import store_nan, store_normal
 
 __all__ = ["LOCAL_CAP", "SHIFTS", "box_fit_normals", "box_fit_windows", "choose_windows"]
 
@@ -213,11 +213,10 @@ def _solve_row(t0, t1m0, t1m1, t1w, t2m0, fx, fy, acol, bv, out_x, out_y, out_z,
         ny = fy * b
         nz = c - a * au - b * bv
         good = ok & (c > 0.0)
-        n2 = nx * nx + ny * ny + nz * nz
-        s = 1.0 / np.sqrt(n2)
-        rx = au * ifx
-        ry = bv * ify
-        s = -s if faces_away(nx * rx + ny * ry + nz, n2, rx * rx + ry * ry + 1.0, nx, ny, nz) else s
+        s = 1.0 / np.sqrt(nx * nx + ny * ny + nz * nz)
+        # n . ray = c, the plane's inverse depth at the pixel (> 0 where ``good``): never the
+        # orientation's tie (kernels.orient.TIE_COS), so its sign decides
+        s = -s if nx * au * ifx + ny * bv * ify + nz > 0.0 else s
         out_x[u] = nx * s if good else nan
         out_y[u] = ny * s if good else nan
         out_z[u] = nz * s if good else nan

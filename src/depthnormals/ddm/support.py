@@ -56,7 +56,6 @@ import numba as nb
 import numpy as np
 
 from .._parallel import run_rows
-from ..kernels.orient import faces_away
 from .boxfit import SHIFTS, box_fit_windows, solve_window
 from .faceswitch import SPAN as SWITCH_SPAN
 from .faceswitch import switch_faces
@@ -591,9 +590,10 @@ def _put_facing(out, v, u, x, y, t, ray, ok):
     """``out[v, u] = (x, y, t)`` turned toward the pixel's ray ``(ray_x, ray_y, 1)``, or NaN
     where not ``ok``."""
     nan = np.float32(np.nan)
-    dot = x * ray[0] + y * ray[1] + t
-    p2 = ray[0] * ray[0] + ray[1] * ray[1] + 1.0
-    sg = np.float32(-1.0) if faces_away(dot, x * x + y * y + t * t, p2, x, y, t) else np.float32(1.0)
+    # no tie rule (kernels.orient.TIE_COS) needed: the normal is a plane of inverse depth
+    # fitted here or on the cell beside, and ``n . ray`` is that plane's inverse depth at the
+    # pixel (times its length), positive wherever the plane has a depth there
+    sg = np.float32(-1.0) if x * ray[0] + y * ray[1] + t > 0.0 else np.float32(1.0)
     out[v, u, 0] = x * sg if ok else nan
     out[v, u, 1] = y * sg if ok else nan
     out[v, u, 2] = t * sg if ok else nan

@@ -27,13 +27,14 @@ TIE_COS2 = TIE_COS * TIE_COS
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def faces_away(dot, n2, p2, nx, ny, nz):
+def faces_away(dot, n2, p2, nx, ny, nz, tie2=TIE_COS2):
     """Whether the normal ``(nx, ny, nz)`` (squared length ``n2``) must be negated to face the
     camera, ``dot = n . X`` for the pixel's point or ray ``X`` (squared length ``p2``):
     ``dot > 0``, but within :data:`TIE_COS` of perpendicular to the ray the first non-zero of
-    ``n_z, n_y, n_x`` decides (negate where it is positive). Branch-free (selects)."""
+    ``n_z, n_y, n_x`` decides (negate where it is positive). Branch-free (selects). ``tie2``:
+    :data:`TIE_COS2`, passed as ``np.float32`` by float32 loops so that they stay float32."""
     key = nz if nz != 0.0 else (ny if ny != 0.0 else nx)
-    tie = dot * dot <= TIE_COS2 * n2 * p2
+    tie = dot * dot <= tie2 * n2 * p2
     return key > 0.0 if tie else dot > 0.0
 
 

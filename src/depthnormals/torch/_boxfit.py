@@ -30,7 +30,6 @@ from ..ddm.auto import _slopes as _auto_slopes
 from ..ddm.boxfit import LOCAL_CAP, MIN_POINTS, SHIFTS
 from ..ddm.support import DEVIATION, FALLBACK_RADIUS
 from ..kernels.eig3 import sym3_adjugate_apply
-from ._common import faces_away
 from ._common import shift as _at
 
 __all__ = ["Fits", "box_fits", "choose_least", "choose_local", "choose_plain", "keep_estimator",
@@ -153,9 +152,8 @@ def _ray_facing(nx, ny, nz, cam, ok):
     n2 = nx * nx + ny * ny + nz * nz
     ok = ok & (n2 > 0) & torch.isfinite(n2)
     inv = torch.rsqrt(torch.where(ok, n2, torch.ones_like(n2)))
-    dot = nx * rx + ny * ry + nz
-    away = faces_away(dot, n2, rx * rx + ry * ry + 1.0, nx, ny, nz)
-    inv = torch.where(ok, torch.where(away, -inv, inv), torch.zeros_like(inv))
+    dot = nx * rx + ny * ry + nz  # the plane's inverse depth: no tie (as the numba box fit)
+    inv = torch.where(ok, torch.where(dot > 0, -inv, inv), torch.zeros_like(inv))
     return nx * inv, ny * inv, nz * inv, ok
 
 
