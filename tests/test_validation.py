@@ -446,3 +446,30 @@ def test_masked_array_pixels_are_invalid_and_long_double_is_float64(method):
                                                            depth_scale=0.001))
     np.testing.assert_array_equal(dn.estimate_normals(z.astype(np.longdouble), K, method=method),
                                   dn.estimate_normals(z, K, method=method))
+
+
+@pytest.mark.parametrize("method", ["3f2n+", "fals", "pcl-covariance-matrix"])
+def test_depths_near_the_dtype_limits_give_unit_normals_or_nan(method):
+    """Valid depth is any finite positive number: 1e-300 and 1e300 beside 1 and 2 (float64),
+    1e-30 and 1e30 (float32) included. Every normal is unit or NaN and the map is NaN exactly
+    where the normal is. Until session 34 (a fuzz of random frames) the plane hypotheses and
+    the box fits squared normals that under- or overflow: zero or infinite "normals", and a
+    finite FALS normal whose map was NaN."""
+    choices = {np.float64: [0.0, np.nan, np.inf, -1.0, 1.0, 2.0, 1e-300, 1e300],
+               np.float32: [0.0, 1.0, 2.0, 1e-30, 1e30, 3e-31, 7e29]}
+    for seed in range(12):
+        rng = np.random.default_rng(seed)
+        for dtype, values in choices.items():
+            z = rng.choice(values, (18, 24)).astype(dtype)
+            z[4:12, 6:18] = (1e-30 if dtype == np.float32 else 1e-300) * (1.0 + 0.01 * np.arange(12))
+            fx = float(10.0 ** rng.uniform(-1, 4))
+            K = (fx, fx, float(rng.uniform(0, 24)), float(rng.uniform(0, 18)))
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", dn.NoValidNormalWarning)
+                n, u = dn.estimate_normals(z, K, method=method, return_uncertainty=True)
+            none = np.isnan(n).any(-1)
+            assert (np.isnan(n).all(-1) == none).all()
+            length = np.linalg.norm(n[~none].astype(np.float64), axis=-1)
+            assert np.allclose(length, 1.0, atol=1e-5), (seed, dtype, length.min(), length.max())
+            assert (np.isnan(u) == none).all(), (seed, dtype)
+            assert ((u[~none] >= 0) & (u[~none] <= 90)).all()

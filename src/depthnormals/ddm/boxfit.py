@@ -212,8 +212,10 @@ def _solve_row(t0, t1m0, t1m1, t1w, t2m0, fx, fy, acol, bv, out_x, out_y, out_z,
         nx = fx * a
         ny = fy * b
         nz = c - a * au - b * bv
-        good = ok & (c > 0.0)
-        s = 1.0 / np.sqrt(nx * nx + ny * ny + nz * nz)
+        n2 = nx * nx + ny * ny + nz * nz
+        # (no fit where the normal's length under- or overflows: depths near float64's limits)
+        good = ok & (c > 0.0) & (n2 > 0.0) & (n2 < inf)
+        s = 1.0 / np.sqrt(n2)
         # n . ray = c, the plane's inverse depth at the pixel (> 0 where ``good``): never the
         # orientation's tie (kernels.orient.TIE_COS), so its sign decides
         s = -s if nx * au * ifx + ny * bv * ify + nz > 0.0 else s

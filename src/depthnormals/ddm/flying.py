@@ -106,7 +106,8 @@ def mixed_share(z: np.ndarray) -> float:
     float
         In [0, 1]; NaN where fewer than :data:`MIN_JUMPS` jumps were counted.
     """
-    z = np.ascontiguousarray(z, dtype=np.float32)
+    with np.errstate(over="ignore"):  # float64 depth past float32's range reads as inf: a jump
+        z = np.ascontiguousarray(z, dtype=np.float32)
     if z.ndim != 2:
         raise ValueError(f"z must be a 2-D depth (H, W), got shape {z.shape}")
     n, m = _mixed_counts(z, JUMP_REL, SIDE_FLAT, INSIDE[0], INSIDE[1])

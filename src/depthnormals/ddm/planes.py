@@ -210,7 +210,11 @@ def _normal_row(z, r, RA, RB, RC, k, s, fx, fy, cx, cy, tmp, out):
         nx = fx * a
         ny = fy * b
         nz = c - a * (np.float32(u) - cx) - b * dv
-        inv = _ONE / np.sqrt(nx * nx + ny * ny + nz * nz)
+        n2 = nx * nx + ny * ny + nz * nz
+        inv = _ONE / np.sqrt(n2)
+        # no normal where its length under- or overflows (depths near the dtype's limits:
+        # 1e-30 in float32, 1e-300 in float64; a zero or NaN vector otherwise)
+        inv = inv if (n2 > _F0) & (n2 < _INF) else _NAN
         # n . (du / fx, dv / fy, 1) = c, the plane's 1/z at the pixel (> 0): flip
         inv = -inv if c > _F0 else inv
         inv = inv + _F0 * z[r, u]  # NaN at invalid depth

@@ -1671,7 +1671,7 @@ def normals_with_uncertainty(compute, depth: Any, K: Any, *, method: str,
         raise ValueError(f"return_uncertainty=True is supported for methods "
                          f"{', '.join(UNCERTAINTY_METHODS)}; got method {method!r}")
     if method == "3f2n+":
-        return _plus(depth, K, depth_scale, options)
+        return _no_gaps(*_plus(depth, K, depth_scale, options))
     normals = compute(depth, K, method=method, depth_scale=depth_scale, **options)
     z, cam = prepare(depth, K, depth_scale)
     c = (float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy))
@@ -1679,7 +1679,27 @@ def normals_with_uncertainty(compute, depth: Any, K: Any, *, method: str,
         r = int(options.get("window", 5)) // 2
     else:
         r = max(1, int(float(options.get("normal_smoothing_size", 10.0))) // 2)
-    return normals, _plain(z, c, normals, r)
+    return _no_gaps(normals, _plain(z, c, normals, r))
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _fill_gaps(normals, unc):
+    """``unc = MAX_ERROR`` where it is NaN and the normal is not (:func:`_no_gaps`)."""
+    h, w = unc.shape
+    cap = np.float32(MAX_ERROR)
+    for v in range(h):
+        for u in range(w):
+            x = unc[v, u]
+            if not (x == x) and normals[v, u, 0] == normals[v, u, 0]:
+                unc[v, u] = cap
+
+
+def _no_gaps(normals: np.ndarray, unc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The map at :data:`MAX_ERROR` (no information) where the normal is finite but the map's
+    own arithmetic failed (NaN: depths near the dtype's limits, 1e300 beside 1; found by a
+    fuzz, session 34), so that it is NaN exactly where the normal is. In place."""
+    _fill_gaps(normals, unc)
+    return normals, unc
 
 
 def _plus(depth, K, depth_scale, options):
