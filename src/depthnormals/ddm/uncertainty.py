@@ -1671,7 +1671,10 @@ def normals_with_uncertainty(compute, depth: Any, K: Any, *, method: str,
         raise ValueError(f"return_uncertainty=True is supported for methods "
                          f"{', '.join(UNCERTAINTY_METHODS)}; got method {method!r}")
     if method == "3f2n+":
-        return _no_gaps(*_plus(depth, K, depth_scale, options))
+        # (no _no_gaps pass: the default's map is NaN only where its normal is, every branch,
+        # depths near the dtype's limits included (tests/test_validation.py); 0.1 ms a 640x480
+        # frame that the map's 1.3x budget does not have)
+        return _plus(depth, K, depth_scale, options)
     normals = compute(depth, K, method=method, depth_scale=depth_scale, **options)
     z, cam = prepare(depth, K, depth_scale)
     c = (float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy))
