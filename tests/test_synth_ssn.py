@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import zipfile
 from pathlib import Path
 
@@ -203,6 +204,22 @@ def test_unknown_version_refused(tmp_path):
     (tmp_path / "d" / "dataset.json").write_text(json.dumps({**meta, "format_version": 9}))
     with pytest.raises(ValueError, match="format version 9; this depthnormals reads versions 1, 2"):
         list(read_synthetic(tmp_path / "d"))
+
+
+@pytest.mark.parametrize("layout", ["npy", "compact"])
+def test_a_truncated_view_file_is_named(both, tmp_path, layout):
+    """A view file cut short (a copy interrupted, a full disk) stops the reader with an error
+    naming the file; the npy layout raised numpy's bare "EOF: reading array header" before
+    (found by `depthnormals evaluate` on such a copy, session 34)."""
+    import shutil
+
+    root = tmp_path / layout
+    shutil.copytree(both / layout, root)
+    scene = root / "indoor" / "living_room-00"
+    victim = scene / ("views/0001.npz" if layout == "compact" else "kinect_v2/0001.npy")
+    victim.write_bytes(victim.read_bytes()[:100])
+    with pytest.raises(ValueError, match=f"{re.escape(str(victim))} is not a readable"):
+        list(read_synthetic(root))
 
 
 # -- resume, Dask ---------------------------------------------------------------------------

@@ -284,8 +284,21 @@ def read_view(path: str | Path,
               variants: Sequence[str]) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     """Decode a view file: ``(normals float32 (H, W, 3), valid bool (H, W), {variant: depth})``.
 
-    Only the members asked for are decompressed.
+    Only the members asked for are decompressed. A file that is not a readable view (truncated,
+    corrupt) raises ValueError naming it.
     """
+    try:
+        return _read_view(path, variants)
+    except (zipfile.BadZipFile, zlib.error, KeyError, EOFError, OSError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path} is not a readable view file: {exc or type(exc).__name__}") from exc
+    except ValueError as exc:
+        if str(path) in str(exc):
+            raise
+        raise ValueError(f"{path} is not a readable view file: {exc}") from exc
+
+
+def _read_view(path: str | Path,
+               variants: Sequence[str]) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     with zipfile.ZipFile(path) as zf:
         codec = json.loads(zf.read(_CODEC))
         if codec.get("version") != 2:

@@ -37,6 +37,7 @@ __all__ = [
     "read_depth",
     "read_intrinsics",
     "read_normals",
+    "read_npy",
     "read_pgm",
     "to_open3d",
     "write_bytes_atomic",
@@ -229,6 +230,28 @@ def _npy_header(path: Path) -> tuple[tuple[int, ...], np.dtype]:
         raise ValueError(f"{path} is truncated: its header says {shape} {dtype} ({need} bytes), the "
                          f"file has {size} bytes")
     return shape, dtype
+
+
+def read_npy(path: str | Path) -> np.ndarray:
+    """A ``.npy`` file of numbers, checked before it is read.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+
+    Returns
+    -------
+    ndarray
+        Its array (at most :data:`MAX_PIXELS` values; no Python objects).
+
+    Raises
+    ------
+    ValueError
+        Naming the file, when its header is corrupt, its data shorter than the header says
+        (a truncated copy), it holds Python objects or more than :data:`MAX_PIXELS` values.
+    """
+    return _read_npy(Path(path))
 
 
 def _read_npy(path: Path) -> np.ndarray:

@@ -28,7 +28,7 @@ import numpy as np
 
 from .._png import read_png
 from ..camera import Intrinsics
-from ..io import read_pgm
+from ..io import read_npy, read_pgm
 from ._common import depth_mask, resolve_intrinsics
 from ._frame import Frame
 
@@ -162,7 +162,7 @@ def _load_raw(path: Path, encoding: str) -> np.ndarray | None:
     if suffix == ".pgm":
         arr = read_pgm(path, byteorder="<" if encoding == "nyu_raw_disparity" else ">")
         return arr if arr.dtype == np.uint16 else None
-    arr = np.load(path, allow_pickle=False)
+    arr = read_npy(path)
     if arr.ndim == 3 and arr.shape[2] == 1:
         arr = arr[..., 0]
     if arr.ndim != 2 or arr.dtype.kind not in "iuf":

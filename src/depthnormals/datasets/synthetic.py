@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..camera import Intrinsics
+from ..io import read_npy
 from ._frame import Frame
 
 __all__ = ["is_synthetic", "read_synthetic"]
@@ -38,8 +39,10 @@ def _load_view(sdir: Path, name: str, variants: Sequence[str],
     nfile = sdir / "normals" / f"{name}.npy"
     if not nfile.is_file():
         return None
-    depths = {v: np.load(sdir / v / f"{name}.npy") for v in variants if (sdir / v / f"{name}.npy").is_file()}
-    return np.load(nfile), np.load(sdir / "valid" / f"{name}.npy"), depths
+    # (checked reads: a truncated or corrupt file is a ValueError naming it, not numpy's EOF)
+    depths = {v: read_npy(sdir / v / f"{name}.npy") for v in variants
+              if (sdir / v / f"{name}.npy").is_file()}
+    return read_npy(nfile), read_npy(sdir / "valid" / f"{name}.npy"), depths
 
 
 def _sidecar(path: Path) -> dict | None:
