@@ -170,7 +170,8 @@ def shift(x: torch.Tensor, dv: int, du: int, fill: float | bool) -> torch.Tensor
 
 def oriented(nx: torch.Tensor, ny: torch.Tensor, nz: torch.Tensor, cam: Camera,
              ok: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-    """(nx, ny, nz) normalised and turned toward the camera (``dot(n, X) < 0``) where ``ok``.
+    """(nx, ny, nz) normalised and turned toward the camera (``dot(n, X) < 0``; perpendicular to
+    the ray, the tie rule of :func:`faces_away`) where ``ok``.
 
     ``X ~ ((u - cx) / fx, (v - cy) / fy, 1)`` (the depth factor does not change the sign).
     Returns the three components (0 where not ``ok`` or of zero length) and the new ``ok``.
