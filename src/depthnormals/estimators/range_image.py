@@ -592,14 +592,78 @@ def sri(depth: Any, K: Any, *, window: int = 5, depth_scale: float | None = None
 
 # ------------------------------------------------------------------------------- LINE-MOD
 
+@nb.njit(cache=True, error_model=_NUMPY)
+def _linemod_direction(zs, zr, du, thr, b0, b1, ok, di, dj):
+    """One of the eight samples for a row's pixels (``zr`` the row, ``zs`` the row of the
+    sample, shifted by ``du`` columns; both slices of equal length, from 0): where it passes
+    (valid, within ``thr`` of the centre) add its terms to ``b0``, ``b1`` as the general
+    path does (``di``, ``dj`` its offsets ``i r``, ``j r``), and clear ``ok`` where it does
+    not (that pixel takes the general path, which searches nearer samples). Branch-free."""
+    for k in range(zr.size):
+        zq = zr[k]
+        zn = zs[k]
+        dz = zn - zq
+        good = (zn == zn) & (abs(dz) <= thr)
+        b0[k] += di * dz if good else 0.0
+        b1[k] += dj * dz if good else 0.0
+        ok[k] &= good
+
+
 @nb.njit(cache=True, nogil=True, error_model=_NUMPY)
 def _linemod_rows(v0, v1, z, fx, fy, cx, cy, r, thr, out):
+    """Rows ``[v0, v1)``: a vectorised pass over the row for the pixels whose eight samples at
+    distance ``r`` all pass (most of a smooth surface; the same sums in the same order as the
+    general path, so the same bits), then the general per-pixel search for the others."""
     h, w = z.shape
+    b0s = np.empty(w)
+    b1s = np.empty(w)
+    oks = np.empty(w, dtype=np.bool_)
+    a = 6.0 * r * r  # sum of du^2 (and of dv^2) over the eight samples at distance r
+    det = a * a - 0.0 * 0.0
     for v in range(v0, v1):
+        zr = z[v]
         for u in range(w):
+            b0s[u] = 0.0
+            b1s[u] = 0.0
+            oks[u] = zr[u] == zr[u]
+        for j in range(-1, 2):  # the general path's order of the samples
+            rr = v + j * r
+            for i in range(-1, 2):
+                if i == 0 and j == 0:
+                    continue
+                if rr < 0 or rr >= h:
+                    oks[:] = False
+                    continue
+                sh = i * r
+                lo = max(0, -sh)
+                hi = min(w, w - sh)
+                oks[:lo] = False
+                oks[hi:] = False
+                if hi > lo:
+                    _linemod_direction(z[rr, lo + sh:hi + sh], zr[lo:hi], sh, thr, b0s[lo:hi],
+                                       b1s[lo:hi], oks[lo:hi], float(i * r), float(j * r))
+        for u in range(w):
+            if oks[u]:
+                zq = zr[u]
+                b0 = b0s[u]
+                b1 = b1s[u]
+                zu = (a * b0 - 0.0 * b1) / det
+                zv = (a * b1 - 0.0 * b0) / det
+                store_normal(out, v, u, fx * zu, fy * zv, -(zq + (u - cx) * zu + (v - cy) * zv),
+                             (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
+                continue
+            _linemod_pixel(z, v, u, fx, fy, cx, cy, r, thr, out)
+
+
+@nb.njit(cache=True, error_model=_NUMPY)
+def _linemod_pixel(z, v, u, fx, fy, cx, cy, r, thr, out):
+    """The general path of one pixel (module doc of :func:`line_mod`)."""
+    h, w = z.shape
+    if True:
+        if True:
             zq = z[v, u]
             if not (zq == zq):
-                continue
+                return
             a00 = a01 = a11 = 0.0
             b0 = b1 = 0.0
             for j in range(-1, 2):
@@ -630,7 +694,7 @@ def _linemod_rows(v0, v1, z, fx, fy, cx, cy, r, thr, out):
                     b1 += dv * dz
             det = a00 * a11 - a01 * a01
             if not (det > 0.0):
-                continue
+                return
             zu = (a11 * b0 - a01 * b1) / det
             zv = (a00 * b1 - a01 * b0) / det
             # tangents at q along u and v with this gradient; their cross product (D2NT form)
