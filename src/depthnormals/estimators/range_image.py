@@ -593,9 +593,9 @@ def sri(depth: Any, K: Any, *, window: int = 5, depth_scale: float | None = None
 # ------------------------------------------------------------------------------- LINE-MOD
 
 @nb.njit(cache=True, error_model=_NUMPY)
-def _linemod_direction(zs, zr, du, thr, b0, b1, ok, di, dj):
+def _linemod_direction(zs, zr, thr, b0, b1, ok, di, dj):
     """One of the eight samples for a row's pixels (``zr`` the row, ``zs`` the row of the
-    sample, shifted by ``du`` columns; both slices of equal length, from 0): where it passes
+    sample, shifted to line up; both slices of equal length, from 0): where it passes
     (valid, within ``thr`` of the centre) add its terms to ``b0``, ``b1`` as the general
     path does (``di``, ``dj`` its offsets ``i r``, ``j r``), and clear ``ok`` where it does
     not (that pixel takes the general path, which searches nearer samples). Branch-free."""
@@ -640,7 +640,7 @@ def _linemod_rows(v0, v1, z, fx, fy, cx, cy, r, thr, out):
                 oks[:lo] = False
                 oks[hi:] = False
                 if hi > lo:
-                    _linemod_direction(z[rr, lo + sh:hi + sh], zr[lo:hi], sh, thr, b0s[lo:hi],
+                    _linemod_direction(z[rr, lo + sh:hi + sh], zr[lo:hi], thr, b0s[lo:hi],
                                        b1s[lo:hi], oks[lo:hi], float(i * r), float(j * r))
         for u in range(w):
             if oks[u]:
@@ -657,49 +657,48 @@ def _linemod_rows(v0, v1, z, fx, fy, cx, cy, r, thr, out):
 
 @nb.njit(cache=True, error_model=_NUMPY)
 def _linemod_pixel(z, v, u, fx, fy, cx, cy, r, thr, out):
-    """The general path of one pixel (module doc of :func:`line_mod`)."""
+    """The general path of one pixel (:func:`line_mod`): each sample at distance ``r`` or,
+    where it fails, the farthest nearer one that passes."""
     h, w = z.shape
-    if True:
-        if True:
-            zq = z[v, u]
-            if not (zq == zq):
-                return
-            a00 = a01 = a11 = 0.0
-            b0 = b1 = 0.0
-            for j in range(-1, 2):
-                for i in range(-1, 2):
-                    if i == 0 and j == 0:
-                        continue
-                    # the sample at distance r along (i, j); where it is invalid, outside or
-                    # beyond the threshold, the farthest nearer one that is not
-                    dz = np.nan
-                    s = r
-                    while s >= 1:
-                        rr = v + j * s
-                        cc = u + i * s
-                        if 0 <= rr < h and 0 <= cc < w:
-                            zn = z[rr, cc]
-                            if zn == zn and abs(zn - zq) <= thr:
-                                dz = zn - zq
-                                break
-                        s -= 1
-                    if not (dz == dz):
-                        continue
-                    du = i * s
-                    dv = j * s
-                    a00 += du * du
-                    a01 += du * dv
-                    a11 += dv * dv
-                    b0 += du * dz
-                    b1 += dv * dz
-            det = a00 * a11 - a01 * a01
-            if not (det > 0.0):
-                return
-            zu = (a11 * b0 - a01 * b1) / det
-            zv = (a00 * b1 - a01 * b0) / det
-            # tangents at q along u and v with this gradient; their cross product (D2NT form)
-            store_normal(out, v, u, fx * zu, fy * zv, -(zq + (u - cx) * zu + (v - cy) * zv),
-                         (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
+    zq = z[v, u]
+    if not (zq == zq):
+        return
+    a00 = a01 = a11 = 0.0
+    b0 = b1 = 0.0
+    for j in range(-1, 2):
+        for i in range(-1, 2):
+            if i == 0 and j == 0:
+                continue
+            # the sample at distance r along (i, j); where it is invalid, outside or
+            # beyond the threshold, the farthest nearer one that is not
+            dz = np.nan
+            s = r
+            while s >= 1:
+                rr = v + j * s
+                cc = u + i * s
+                if 0 <= rr < h and 0 <= cc < w:
+                    zn = z[rr, cc]
+                    if zn == zn and abs(zn - zq) <= thr:
+                        dz = zn - zq
+                        break
+                s -= 1
+            if not (dz == dz):
+                continue
+            du = i * s
+            dv = j * s
+            a00 += du * du
+            a01 += du * dv
+            a11 += dv * dv
+            b0 += du * dz
+            b1 += dv * dz
+    det = a00 * a11 - a01 * a01
+    if not (det > 0.0):
+        return
+    zu = (a11 * b0 - a01 * b1) / det
+    zv = (a00 * b1 - a01 * b0) / det
+    # tangents at q along u and v with this gradient; their cross product (D2NT form)
+    store_normal(out, v, u, fx * zu, fy * zv, -(zq + (u - cx) * zu + (v - cy) * zv),
+                 (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
 
 
 def line_mod(depth: Any, K: Any, *, window: int = 11, threshold: float = 0.05,
