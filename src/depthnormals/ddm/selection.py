@@ -19,7 +19,7 @@ import numpy as np
 
 from .._parallel import run_rows
 from ..kernels.depth import C_FX, C_FY, C_INF, C_MAX, C_ONE, C_TIE2, C_ZERO, Pinhole, row_arrays
-from ..kernels.orient import store_nan, store_normal
+from ..kernels.orient import faces_away, store_nan, store_normal
 
 __all__ = ["CROSS", "SQUARE", "clamp_key", "cross_select_row", "inconsistency", "inconsistency_pq",
            "select_min", "select_ring_row"]
@@ -258,11 +258,7 @@ def _cross_select(z3, n3, k3, acol, b, c, selfw, eps, out_row, test):
         nrm = np.sqrt(n2)
         inv = one / nrm
         ax = A * ifx
-        dot = x * ax + y * bfy + t
-        # perpendicular to the ray: n_z, n_y, n_x decide (kernels.orient.faces_away)
-        key = t if t != zero else (y if y != zero else x)
-        tie = dot * dot <= tie2 * n2 * (ax * ax + p2y)
-        inv = -inv if (key > zero if tie else dot > zero) else inv
+        inv = -inv if faces_away(x * ax + y * bfy + t, n2, ax * ax + p2y, x, y, t, tie2) else inv
         inv = inv if (zq == zq) & (k < inf) else nan
         bx[u] = x * inv
         by[u] = y * inv

@@ -32,7 +32,8 @@ def faces_away(dot, n2, p2, nx, ny, nz, tie2=TIE_COS2):
     camera, ``dot = n . X`` for the pixel's point or ray ``X`` (squared length ``p2``):
     ``dot > 0``, but within :data:`TIE_COS` of perpendicular to the ray the first non-zero of
     ``n_z, n_y, n_x`` decides (negate where it is positive). Branch-free (selects). ``tie2``:
-    :data:`TIE_COS2`, passed as ``np.float32`` by float32 loops so that they stay float32."""
+    :data:`TIE_COS2` in the loop's type (the row passes read it from their constants row,
+    :data:`depthnormals.kernels.depth.C_TIE2`, so that float32 stays float32)."""
     key = nz if nz != 0.0 else (ny if ny != 0.0 else nx)
     tie = dot * dot <= tie2 * n2 * p2
     return key > 0.0 if tie else dot > 0.0

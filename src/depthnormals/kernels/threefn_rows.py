@@ -13,7 +13,7 @@ import numba as nb
 import numpy as np
 
 from .depth import C_FX, C_FY, C_HALF, C_INF, C_NINF, C_ONE, C_TIE2, C_ZERO, row_arrays
-from .orient import oriented_unit
+from .orient import faces_away, oriented_unit
 from .stencils import roberts_gradient, stencil_derivative
 
 __all__ = ["NEIGHBOURS8", "Filters", "RowInputs", "RowScratch", "central_tendency", "generic_normal",
@@ -300,11 +300,7 @@ def _fd_row(z3, r3, up, down, eh, acol, b, c, mode, out_row, out_flag):
         inv = one / nrm
         dot = gu * a + gv * b + nz if has else -one  # dot(n, X) / z
         iax = a / fx
-        # perpendicular to the ray: n_z, n_y, n_x decide (orient.faces_away)
-        key = nz if nz != zero else (ny if ny != zero else nx)
-        tie = dot * dot <= tie2 * nrm2 * (p2y + iax * iax)
-        away = key > zero if tie else dot > zero
-        inv = -inv if away else inv
+        inv = -inv if faces_away(dot, nrm2, p2y + iax * iax, nx, ny, nz, tie2) else inv
         bx[u] = nx * inv
         by[u] = ny * inv
         bz[u] = nz * inv
