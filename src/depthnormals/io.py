@@ -137,7 +137,7 @@ def read_depth(path: str | Path, *, depth_scale: float | None = None,
         raise FileNotFoundError(f"depth file {path} does not exist")
     suffix = path.suffix.lower()
     if suffix == ".npy":
-        arr = _read_npy(path)
+        arr = read_npy(path)
     elif suffix == ".png":
         try:
             data = path.read_bytes()
@@ -251,10 +251,7 @@ def read_npy(path: str | Path) -> np.ndarray:
         Naming the file, when its header is corrupt, its data shorter than the header says
         (a truncated copy), it holds Python objects or more than :data:`MAX_PIXELS` values.
     """
-    return _read_npy(Path(path))
-
-
-def _read_npy(path: Path) -> np.ndarray:
+    path = Path(path)
     shape, _ = _npy_header(path)
     if math.prod(shape) > MAX_PIXELS:
         raise ValueError(f"{path} holds shape {shape}: more than {MAX_PIXELS} values, not a depth image")

@@ -1671,7 +1671,7 @@ def normals_with_uncertainty(compute, depth: Any, K: Any, *, method: str,
         raise ValueError(f"return_uncertainty=True is supported for methods "
                          f"{', '.join(UNCERTAINTY_METHODS)}; got method {method!r}")
     if method == "3f2n+":
-        # (no _no_gaps pass: the default's map is NaN only where its normal is, every branch,
+        # (no _fill_gaps pass: the default's map is NaN only where its normal is, every branch,
         # depths near the dtype's limits included (tests/test_validation.py); 0.1 ms a 640x480
         # frame that the map's 1.3x budget does not have)
         return _plus(depth, K, depth_scale, options)
@@ -1682,12 +1682,16 @@ def normals_with_uncertainty(compute, depth: Any, K: Any, *, method: str,
         r = int(options.get("window", 5)) // 2
     else:
         r = max(1, int(float(options.get("normal_smoothing_size", 10.0))) // 2)
-    return _no_gaps(normals, _plain(z, c, normals, r))
+    unc = _plain(z, c, normals, r)
+    _fill_gaps(normals, unc)
+    return normals, unc
 
 
 @nb.njit(cache=True, error_model="numpy")
 def _fill_gaps(normals, unc):
-    """``unc = MAX_ERROR`` where it is NaN and the normal is not (:func:`_no_gaps`)."""
+    """``unc = MAX_ERROR`` (no information) where it is NaN but the normal is not: the map's
+    own arithmetic failed (depths near the dtype's limits, 1e300 beside 1; found by a fuzz,
+    session 34), so that the map is NaN exactly where the normal is. In place."""
     h, w = unc.shape
     cap = np.float32(MAX_ERROR)
     for v in range(h):
@@ -1695,14 +1699,6 @@ def _fill_gaps(normals, unc):
             x = unc[v, u]
             if not (x == x) and normals[v, u, 0] == normals[v, u, 0]:
                 unc[v, u] = cap
-
-
-def _no_gaps(normals: np.ndarray, unc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The map at :data:`MAX_ERROR` (no information) where the normal is finite but the map's
-    own arithmetic failed (NaN: depths near the dtype's limits, 1e300 beside 1; found by a
-    fuzz, session 34), so that it is NaN exactly where the normal is. In place."""
-    _fill_gaps(normals, unc)
-    return normals, unc
 
 
 def _plus(depth, K, depth_scale, options):
