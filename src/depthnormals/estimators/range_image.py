@@ -619,7 +619,6 @@ def _linemod_rows(v0, v1, z, fx, fy, cx, cy, r, thr, out):
     b1s = np.empty(w)
     oks = np.empty(w, dtype=np.bool_)
     a = 6.0 * r * r  # sum of du^2 (and of dv^2) over the eight samples at distance r
-    det = a * a - 0.0 * 0.0
     for v in range(v0, v1):
         zr = z[v]
         for u in range(w):
@@ -643,16 +642,24 @@ def _linemod_rows(v0, v1, z, fx, fy, cx, cy, r, thr, out):
                     _linemod_direction(z[rr, lo + sh:hi + sh], zr[lo:hi], thr, b0s[lo:hi],
                                        b1s[lo:hi], oks[lo:hi], float(i * r), float(j * r))
         for u in range(w):
-            if oks[u]:
-                zq = zr[u]
-                b0 = b0s[u]
-                b1 = b1s[u]
-                zu = (a * b0 - 0.0 * b1) / det
-                zv = (a * b1 - 0.0 * b0) / det
-                store_normal(out, v, u, fx * zu, fy * zv, -(zq + (u - cx) * zu + (v - cy) * zv),
-                             (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
-                continue
-            _linemod_pixel(z, v, u, fx, fy, cx, cy, r, thr, out)
+            if oks[u]:  # (sum du dv over the eight samples: 0)
+                _linemod_store(out, v, u, zr[u], a, 0.0, a, b0s[u], b1s[u], fx, fy, cx, cy)
+            else:
+                _linemod_pixel(z, v, u, fx, fy, cx, cy, r, thr, out)
+
+
+@nb.njit(cache=True, error_model=_NUMPY, inline="always")
+def _linemod_store(out, v, u, zq, a00, a01, a11, b0, b1, fx, fy, cx, cy):
+    """Solve the pixel's normal equations for the depth gradient and store the normal of the
+    tangents at q along u and v with it (their cross product, D2NT form); nothing where the
+    samples do not determine a gradient."""
+    det = a00 * a11 - a01 * a01
+    if not (det > 0.0):
+        return
+    zu = (a11 * b0 - a01 * b1) / det
+    zv = (a00 * b1 - a01 * b0) / det
+    store_normal(out, v, u, fx * zu, fy * zv, -(zq + (u - cx) * zu + (v - cy) * zv),
+                 (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
 
 
 @nb.njit(cache=True, error_model=_NUMPY)
@@ -691,14 +698,7 @@ def _linemod_pixel(z, v, u, fx, fy, cx, cy, r, thr, out):
             a11 += dv * dv
             b0 += du * dz
             b1 += dv * dz
-    det = a00 * a11 - a01 * a01
-    if not (det > 0.0):
-        return
-    zu = (a11 * b0 - a01 * b1) / det
-    zv = (a00 * b1 - a01 * b0) / det
-    # tangents at q along u and v with this gradient; their cross product (D2NT form)
-    store_normal(out, v, u, fx * zu, fy * zv, -(zq + (u - cx) * zu + (v - cy) * zv),
-                 (u - cx) * zq / fx, (v - cy) * zq / fy, zq)
+    _linemod_store(out, v, u, zq, a00, a01, a11, b0, b1, fx, fy, cx, cy)
 
 
 def line_mod(depth: Any, K: Any, *, window: int = 11, threshold: float = 0.05,
