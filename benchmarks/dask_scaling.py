@@ -58,7 +58,7 @@ def main() -> None:
         def run(name: str, client=None) -> None:
             c0, w0, t0 = time.process_time(), worker_cpu(client), time.perf_counter()
             s = run_estimate([src], root / f"out{next(runs)}", method=args.method, K=K,
-                             batch_size=args.batch, client=client)
+                             batch_size=args.batch, scheduler=client)
             times[name].append(time.perf_counter() - t0)
             cpu[name].append(time.process_time() - c0 + worker_cpu(client) - w0)
             assert s.written == args.frames

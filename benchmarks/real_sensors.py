@@ -14,8 +14,14 @@ beside wall time, as in ``benchmarks/targets.py``: the shared VM moves wall-cloc
 Every estimate is turned to face the camera (``dot(n, X) < 0``), as ours are, so the peers'
 arbitrary signs do not count as errors; zero vectors count as missing.
 
+A folder whose ``intrinsics.json`` gives the lens's ``distortion`` (``tests/data/azure_kinect_tof``,
+a time-of-flight frame) is read undistorted (``depthnormals.undistort_depth``); with
+``--lens-ignored`` every method is also scored on the stored grid read as a pinhole image, on
+the same reference (its normals carried onto the undistorted grid by the same pixel map).
+
     python benchmarks/real_sensors.py [--methods 3f2n+,opencv-fals-7] [--json OUT]
                                       [--repeats 5] [--root ../shared/data/real-sensors]
+                                      [--lens-ignored]
 """
 
 from __future__ import annotations
@@ -114,8 +120,30 @@ def _facing(normals: np.ndarray, depth: np.ndarray, K: np.ndarray) -> np.ndarray
     return n
 
 
-def accuracy(root: Path, labels: list[str], seed: int) -> dict:
-    """folder -> label -> mean over the folder's frames of interior / rim / coverage."""
+def _lens_ignored(frame, label: str) -> np.ndarray:
+    """``label``'s normals of ``frame`` computed on its stored (distorted) grid, read as a
+    pinhole image, and carried onto the undistorted grid by the pixel map of
+    ``depthnormals.undistort_depth`` (each pixel takes the normal of the stored pixel its ray
+    lands on: the normal of the same surface point)."""
+    from depthnormals.datasets.realsensors import read_realsensors
+
+    (raw,) = [f for f in read_realsensors(Path(frame.meta["depth_file"]).parent, undistort=False)
+              if f.name == frame.name]
+    depth = raw.depth.astype(np.float32)
+    est = _facing(METHODS[label](depth, raw.K), depth, raw.K)
+    h, w = depth.shape
+    probe = dn.undistort_depth(np.arange(h * w, dtype=np.float64).reshape(h, w), raw.K,
+                               frame.meta["undistorted"])
+    idx = np.where(np.isfinite(probe), probe, -1).astype(np.int64)
+    flat = est.reshape(-1, 3)
+    return np.where((idx >= 0)[..., None], flat[np.maximum(idx, 0)], np.nan)
+
+
+def accuracy(root: Path, labels: list[str], seed: int, lens_ignored: bool = False) -> dict:
+    """folder -> label -> mean over the folder's frames of interior / rim / coverage; with
+    ``lens_ignored``, for the folders whose ``intrinsics.json`` gives a lens distortion, also
+    ``"<label> (lens ignored)"``: the method on the stored grid read as a pinhole image, scored
+    on the same reference (:func:`_lens_ignored`)."""
     per: dict[str, dict[str, list[dict]]] = {}
     planes: dict[str, int] = {}
     for frame in open_dataset(root):
@@ -124,8 +152,15 @@ def accuracy(root: Path, labels: list[str], seed: int) -> dict:
         band = crease_band(frame.depth, frame.K, ref)
         planes[frame.group] = planes.get(frame.group, 0) + ref.n_planes
         depth = frame.depth.astype(np.float32)
-        for label in labels:
-            est = _facing(METHODS[label](depth, frame.K), depth, frame.K)
+        runs = [(label, False) for label in labels]
+        if lens_ignored and frame.meta.get("undistorted"):
+            runs += [(label, True) for label in labels]
+        for label, ignored in runs:
+            if ignored:
+                est = _lens_ignored(frame, label)
+                label = f"{label} (lens ignored)"
+            else:
+                est = _facing(METHODS[label](depth, frame.K), depth, frame.K)
             score = score_planes(est, ref)
             creases = score_creases(est, band)
             score.update({f"crease_{k}": creases[k] for k in ("mean", "near_mean", "far_mean")})
@@ -210,6 +245,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=5, help="timing repeats per frame")
     parser.add_argument("--seed", type=int, default=0, help="seed of the plane reference")
     parser.add_argument("--no-speed", action="store_true", help="skip the timing")
+    parser.add_argument("--lens-ignored", action="store_true",
+                        help="for folders with a lens distortion, also score each method on the "
+                             "stored grid read as a pinhole image, on the same reference")
     args = parser.parse_args(argv)
     labels = [m.strip() for m in args.methods.split(",") if m.strip()]
     unknown = [m for m in labels if m not in METHODS]
@@ -219,7 +257,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"{args.root} does not exist")
     print(f"machine: {machine()}; plane reference seed {args.seed}; {args.root}; "
           f"git {_git_state()}")
-    acc = accuracy(args.root, labels, args.seed)
+    acc = accuracy(args.root, labels, args.seed, args.lens_ignored)
+    if args.lens_ignored:  # the rows of the folders that have them
+        labels = labels + [f"{m} (lens ignored)" for m in labels
+                           if all(f"{m} (lens ignored)" in acc[g] for g in acc)]
     print("\nplanes per folder: " + ", ".join(f"{g} {acc[g]['planes']}" for g in acc))
     print("\n### interior mean error (deg), >= 5 px inside the planes\n")
     print(_table(acc, labels, "interior_mean"))

@@ -56,7 +56,7 @@ def _files(folder: Path) -> dict[str, bytes]:
 
 def test_estimate_on_cluster_equals_serial(client, frames, tmp_path):
     serial = jobs.run_estimate([frames], tmp_path / "serial", method="3f2n+", K=K)
-    dask = jobs.run_estimate([frames], tmp_path / "dask", method="3f2n+", K=K, client=client, batch_size=5)
+    dask = jobs.run_estimate([frames], tmp_path / "dask", method="3f2n+", K=K, scheduler=client, batch_size=5)
     assert (serial.planned, serial.written, dask.planned, dask.written) == (24, 24, 24, 24)
     a, b = _files(tmp_path / "serial"), _files(tmp_path / "dask")
     assert len(a) == 24 and a == b
@@ -64,7 +64,7 @@ def test_estimate_on_cluster_equals_serial(client, frames, tmp_path):
     assert np.load(tmp_path / "dask" / "07.npy").tobytes() == \
         dn.estimate_normals(_frame(7), K, method="3f2n+").tobytes()
     # resumable on the cluster too: nothing left to do
-    again = jobs.run_estimate([frames], tmp_path / "dask", method="3f2n+", K=K, client=client)
+    again = jobs.run_estimate([frames], tmp_path / "dask", method="3f2n+", K=K, scheduler=client)
     assert (again.written, again.skipped) == (0, 24)
 
 
@@ -214,10 +214,10 @@ def test_workers_of_another_build_are_refused_before_any_work(client, frames, tm
     assert client.run(cluster._worker_code) == {w: here for w in client.scheduler_info()["workers"]}
     monkeypatch.setattr(_fingerprint, "code_fingerprint", lambda: "0" * 24)
     with pytest.raises(cluster.WorkerCodeMismatch, match="another build of depthnormals"):
-        jobs.run_estimate([frames], tmp_path / "out", method="3f2n", K=K, client=client)
+        jobs.run_estimate([frames], tmp_path / "out", method="3f2n", K=K, scheduler=client)
     assert not list(tmp_path.rglob("*.npy"))
     monkeypatch.undo()
-    assert jobs.run_estimate([frames], tmp_path / "out", method="3f2n", K=K, client=client).written == 24
+    assert jobs.run_estimate([frames], tmp_path / "out", method="3f2n", K=K, scheduler=client).written == 24
 
 
 def test_a_task_checks_its_workers_build_before_it_starts(tmp_path):

@@ -5,7 +5,7 @@ Public API
 estimate_normals, methods          the dispatcher over every registered estimator
 three_filters_to_normal, d2nt, ... one function per estimator
 angular_error, normal_metrics      evaluation
-Intrinsics, backproject            the camera
+Intrinsics, backproject            the camera (undistort_depth: lens distortion undone)
 datasets, io                       readers and writers
 
 ``import depthnormals`` stays light: no torch, no matplotlib.
@@ -16,7 +16,7 @@ from __future__ import annotations
 from . import _numba_cache, datasets, io  # noqa: F401 (_numba_cache first: before any kernel)
 from ._parallel import get_num_threads, set_num_threads
 from ._validate import NoValidNormalWarning
-from .camera import Intrinsics, as_intrinsics, backproject
+from .camera import Intrinsics, as_intrinsics, backproject, undistort_depth
 from .ddm import (
     NoiseProfile,
     discontinuity_discrimination,
@@ -85,5 +85,6 @@ __all__ = [
     "to_open3d",
     "uncertainty_to_covariance",
     "uncertainty_to_kappa",
+    "undistort_depth",
     "vector_svd",
 ]

@@ -24,7 +24,7 @@ import numpy as np
 
 from ._png import decode_png, encode_png, read_png
 from ._validate import check_depth, check_normals, check_positive
-from .camera import Intrinsics, as_intrinsics
+from .camera import Intrinsics, as_intrinsics, check_distortion
 
 __all__ = [
     "OUTPUT_SUFFIXES",
@@ -385,6 +385,12 @@ class CameraFile:
     raw_format : str or None
         The free-text ``raw_format`` note of a real-sensor folder's ``intrinsics.json``
         (:func:`depthnormals.datasets.realsensors.encoding_of` reads an encoding from it).
+    distortion : tuple of float
+        The lens's distortion in OpenCV's order (key ``distortion``: ``[k1, k2, p1, p2[, k3[,
+        k4, k5, k6[, s1, s2, s3, s4]]]]``; () when absent or all 0): the command line
+        resamples each depth image onto the pinhole grid of ``K`` first
+        (:func:`depthnormals.undistort_depth`). A ROS ``camera_info``'s ``D`` is not read (its
+        depth topics are taken as rectified, ``image_rect``).
     """
 
     K: Intrinsics
@@ -394,6 +400,7 @@ class CameraFile:
     source: Path | None = None
     encoding: str | None = None
     raw_format: str | None = None
+    distortion: tuple[float, ...] = ()
 
 
 def read_camera_file(path: str | Path) -> CameraFile:
@@ -405,7 +412,8 @@ def read_camera_file(path: str | Path) -> CameraFile:
       flat), or ``P`` / ``p`` (3x4 projection), optionally under a ``camera`` or
       ``intrinsics`` key; beside them, optional ``depth_scale`` (metres per unit),
       ``invalid`` (or ``invalid_value``: raw values, e.g. ``[0, 65535]``), ``max_depth``
-      (metres) and ``encoding`` (``"linear"`` unless a dataset reader says otherwise).
+      (metres), ``encoding`` (``"linear"`` unless a dataset reader says otherwise) and
+      ``distortion`` (the lens's, OpenCV's order: :func:`depthnormals.undistort_depth`).
     - ROS ``camera_info`` YAML (``camera_calibration_parsers``: ``camera_matrix: {rows: 3,
       cols: 3, data: [...]}``, else ``projection_matrix``), and a ``camera_info`` message
       as ``rostopic echo`` / ``ros2 topic echo`` print it (``K: [...]`` / ``k: [...]``).
@@ -541,11 +549,14 @@ def _mapping_camera(data: dict, path: Path) -> CameraFile:
     if encoding is not None and not isinstance(encoding, str):
         raise ValueError(f'"encoding" must be a name such as "linear"; got {encoding!r}')
     raw_format = extras.get("raw_format")
+    dist = extras.get("distortion")
+    dist = () if dist is None else check_distortion(dist, '"distortion"')
     return CameraFile(K, scale, codes, max_depth, path, encoding,
-                      None if raw_format is None else str(raw_format))
+                      None if raw_format is None else str(raw_format), dist if any(dist) else ())
 
 
-_EXTRAS = ("depth_scale", "invalid", "invalid_value", "max_depth", "encoding", "raw_format")
+_EXTRAS = ("depth_scale", "invalid", "invalid_value", "max_depth", "encoding", "raw_format",
+           "distortion")
 
 
 def _inline_camera(text: str) -> Intrinsics | None:

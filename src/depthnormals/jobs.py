@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 
 from ._fingerprint import array_digest, code_fingerprint
-from .camera import Intrinsics, as_intrinsics
+from .camera import Intrinsics, as_intrinsics, check_distortion, undistort_depth
 from .io import DEPTH_SUFFIXES, VIS_CONVENTIONS, not_depth_reason
 
 __all__ = ["FORMATS", "INPUTS_LOG", "MANIFEST", "EstimateJob", "EstimateSettings", "RunSummary",
@@ -69,8 +69,9 @@ _MAGIC = set("*?[")
 @dataclass(frozen=True)
 class EstimateSettings:
     """What every frame of a run shares: the method, its options, how depth files are read
-    (scale, invalid raw codes, maximum depth in metres), the ``.vis.png`` colouring and whether
-    the expected-error map is written beside each output (:func:`uncertainty_path`)."""
+    (scale, invalid raw codes, maximum depth in metres, the lens distortion undone first), the
+    ``.vis.png`` colouring and whether the expected-error map is written beside each output
+    (:func:`uncertainty_path`)."""
 
     method: str
     options: Mapping[str, Any] = field(default_factory=dict)
@@ -79,6 +80,7 @@ class EstimateSettings:
     max_depth: float | None = None
     vis: str = "3f2n"
     uncertainty: bool = False
+    distortion: tuple[float, ...] = ()
 
 
 class SettingsMismatch(ValueError):
@@ -338,6 +340,8 @@ def estimate_job(job: EstimateJob, settings: EstimateSettings) -> tuple[str, int
         depth = job.depth
         if settings.max_depth is not None:
             depth = np.where(depth > settings.max_depth, np.nan, depth).astype(depth.dtype)
+    if settings.distortion:  # onto the pinhole grid of K (the PLY's points too)
+        depth = undistort_depth(depth, job.K, settings.distortion)
     try:
         normals, unc = normals_and_uncertainty(depth, job.K, settings.method, settings.options,
                                                settings.uncertainty)
@@ -357,12 +361,16 @@ def manifest_settings(settings: EstimateSettings, K: Any, fmt: str) -> dict[str,
     """The settings a manifest records and a resumed run must match: method, options, depth
     scale, invalid codes, maximum depth, intrinsics (None: each dataset frame's own),
     output format and, for ``vis.png``, the colouring; ``"uncertainty": True`` when the
-    expected-error maps are written (absent otherwise); and ``library_code``, the digest of the
-    library's modules (:func:`depthnormals._fingerprint.code_fingerprint`): outputs of an
-    edited or upgraded library are not taken as done (its version string does not change
-    between development builds)."""
+    expected-error maps are written and ``"distortion"`` when the depth is undistorted first
+    (each absent otherwise, so that the manifests of runs without them still match); and
+    ``library_code``, the digest of the library's modules
+    (:func:`depthnormals._fingerprint.code_fingerprint`): outputs of an edited or upgraded
+    library are not taken as done (its version string does not change between development
+    builds)."""
     cam = None if K is None else as_intrinsics(K)
-    extra = {"uncertainty": True} if settings.uncertainty else {}
+    extra: dict[str, Any] = {"uncertainty": True} if settings.uncertainty else {}
+    if settings.distortion:
+        extra["distortion"] = [float(c) for c in settings.distortion]
     return {
         "method": settings.method,
         "options": json.loads(json.dumps(dict(settings.options), sort_keys=True, default=repr)),
@@ -504,12 +512,22 @@ def _remove_run_traces(out: Path, created: bool) -> None:
         shutil.rmtree(out, ignore_errors=True)
 
 
+def _distortion(distortion: Sequence[float] | None) -> tuple[float, ...]:
+    """``distortion`` checked (:func:`depthnormals.camera.check_distortion`); () for None, an
+    empty sequence or all zeros (nothing to undo)."""
+    if distortion is None or (isinstance(distortion, (tuple, list)) and not distortion):
+        return ()
+    d = check_distortion(distortion)
+    return d if any(d) else ()
+
+
 def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: str, K: Any = None,
                  options: Mapping[str, Any] | None = None, depth_scale: float | None = None,
                  fmt: str = "npy", resume: bool = True, progress: bool = False,
-                 scheduler: str | None = None, batch_size: int = 16, client: Any = None,
-                 invalid: Sequence[float] = (), max_depth: float | None = None,
-                 vis: str = "3f2n", uncertainty: bool = False) -> RunSummary:
+                 scheduler: Any = None, batch_size: int = 16, invalid: Sequence[float] = (),
+                 max_depth: float | None = None,
+                 vis: str = "3f2n", uncertainty: bool = False,
+                 distortion: Sequence[float] | None = None) -> RunSummary:
     """Estimate the normals of every frame of ``inputs`` into ``out_dir``.
 
     Parameters
@@ -528,14 +546,13 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
         raises :class:`SettingsMismatch`. False recomputes and replaces every output.
     progress : bool, default False
         Progress on stderr (:class:`depthnormals.cluster.Progress`).
-    scheduler : str, optional
+    scheduler : str or distributed.Client, optional
         ``"local"``, ``"local:N"`` or ``"tcp://host:port"``: run on Dask
-        (:func:`depthnormals.cluster.connect`); default on this machine's threads. Workers
-        must see the input and output paths (a shared file system on several machines).
+        (:func:`depthnormals.cluster.connect`); or an open ``distributed.Client`` to run
+        on (left open); default on this machine's threads. Workers must see the input and
+        output paths (a shared file system on several machines).
     batch_size : int, default 16
         Frames per Dask task.
-    client : distributed.Client, optional
-        An open client to use instead of ``scheduler``.
     invalid : sequence of numbers, optional
         Raw values of depth files that mark invalid pixels (e.g. ``(65535,)``).
     max_depth : float, optional
@@ -548,6 +565,11 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
         before the normals); a ``.ply`` output also carries it per point (``float
         uncertainty``). Recorded in the manifest. Only for the methods of
         ``return_uncertainty=True``.
+    distortion : sequence of 4, 5, 8 or 12 floats, optional
+        The lens distortion of the depth images (OpenCV's order, ``k1, k2, p1, p2[, k3[, k4,
+        k5, k6[, s1, s2, s3, s4]]]``): each frame is resampled onto the pinhole grid of its
+        ``K`` before its normals (:func:`depthnormals.undistort_depth`); the outputs, a
+        ``.ply``'s points included, are on that grid. Recorded in the manifest.
 
     Returns
     -------
@@ -564,6 +586,9 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
     from .registry import get_estimator
 
     get_estimator(method[:-1] if method.endswith("+") else method)  # a bad name fails before any work
+    if scheduler is not None and not isinstance(scheduler, str) and not hasattr(scheduler, "submit"):
+        raise TypeError(f"scheduler must be an address ('local', 'local:N', 'tcp://host:port') or an "
+                        f"open distributed.Client; got {type(scheduler).__name__}")
     check_choice(vis, "vis", VIS_CONVENTIONS)
     check_batch_size(batch_size)
     if fmt not in FORMATS:
@@ -576,7 +601,7 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
                              f"{', '.join(UNCERTAINTY_METHODS)}; got method {method!r}")
     settings = EstimateSettings(method, dict(options or {}), depth_scale, tuple(float(c) for c in invalid),
                                 check_positive(max_depth, "max_depth", allow_none=True), vis,
-                                bool(uncertainty))
+                                bool(uncertainty), _distortion(distortion))
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise ValueError(f"output {out} exists and is not a folder")
@@ -632,8 +657,9 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
                     no_normal.append(result[0])
                 bar.update(job.label)
 
-            if client is not None:
-                results = map_batches(func, todo(), client=client, batch_size=batch_size, on_done=on_done)
+            if scheduler is not None and not isinstance(scheduler, str):  # an open client
+                results = map_batches(func, todo(), client=scheduler, batch_size=batch_size,
+                                      on_done=on_done)
             elif scheduler is not None:
                 with connect(scheduler) as cl:
                     results = map_batches(func, todo(), client=cl, batch_size=batch_size, on_done=on_done)

@@ -51,6 +51,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "the camera file's invalid list; 0, NaN and inf are always invalid)")
     parser.add_argument("--max-depth", type=float, default=None, metavar="METRES",
                         help="depth beyond this is invalid (default the camera file's max_depth, else none)")
+    parser.add_argument("--distortion", type=parse_distortion, default=None,
+                        metavar="K1,K2,P1,P2[,K3[,K4,K5,K6]]",
+                        help="the lens distortion of the depth images, OpenCV's order (4, 5, 8 or 12 "
+                             "numbers): each is resampled onto the pinhole grid of -K first (nearest "
+                             "pixel); default the camera file's distortion, else none")
     parser.add_argument("--vis", default="3f2n", choices=("3f2n", "open3d"),
                         help=".vis.png colouring: 3f2n = (1 - n) / 2 (default, the 3F2N papers'), "
                              "open3d = (n + 1) / 2 (Open3D's and most viewers')")
@@ -99,6 +104,19 @@ def parse_codes(text: str) -> tuple[float, ...]:
             f"--invalid must be comma-separated numbers, e.g. 65535 or 0,2047; got {text!r}") from exc
 
 
+def parse_distortion(text: str) -> tuple[float, ...]:
+    """``"0.1,-0.2,0,0"`` -> ``(0.1, -0.2, 0.0, 0.0)``: the coefficients of ``--distortion``
+    (4, 5, 8 or 12, OpenCV's order)."""
+    from ..camera import check_distortion
+
+    try:
+        return check_distortion([float(x) for x in text.split(",") if x.strip()], "--distortion")
+    except (TypeError, ValueError) as exc:
+        raise argparse.ArgumentTypeError(
+            f"--distortion must be 4, 5, 8 or 12 comma-separated numbers in OpenCV's order "
+            f"(k1,k2,p1,p2[,k3[,k4,k5,k6[,s1,s2,s3,s4]]]); got {text!r}") from exc
+
+
 def parse_options(items: list[str]) -> dict:
     """``["a=1", "b=sobel"]`` -> ``{"a": 1, "b": "sobel"}`` (values parsed as JSON when possible)."""
     out = {}
@@ -126,11 +144,13 @@ class ReadSettings:
     depth_scale: float | None
     invalid: tuple[float, ...]
     max_depth: float | None
+    distortion: tuple[float, ...] = ()
 
 
 def read_settings(args: argparse.Namespace, camera: Any) -> ReadSettings:
-    """``--depth-scale`` / ``--invalid`` / ``--max-depth``, each defaulting to the camera
-    file's ``depth_scale`` / ``invalid`` / ``max_depth`` (:func:`depthnormals.io.read_camera_file`)."""
+    """``--depth-scale`` / ``--invalid`` / ``--max-depth`` / ``--distortion``, each defaulting
+    to the camera file's ``depth_scale`` / ``invalid`` / ``max_depth`` / ``distortion``
+    (:func:`depthnormals.io.read_camera_file`)."""
     from .._validate import check_positive
 
     encoding = _encoding(camera)
@@ -143,7 +163,8 @@ def read_settings(args: argparse.Namespace, camera: Any) -> ReadSettings:
     max_depth = args.max_depth if args.max_depth is not None else getattr(camera, "max_depth", None)
     check_positive(scale, "--depth-scale", allow_none=True)
     check_positive(max_depth, "--max-depth", allow_none=True)
-    return ReadSettings(scale, tuple(invalid), max_depth)
+    dist = args.distortion if args.distortion is not None else getattr(camera, "distortion", ())
+    return ReadSettings(scale, tuple(invalid), max_depth, tuple(dist) if any(dist) else ())
 
 
 def _encoding(camera: Any) -> str:
@@ -171,7 +192,7 @@ def run_many(args: argparse.Namespace) -> int:
                      options=parse_options(args.option), depth_scale=rs.depth_scale, fmt=args.format,
                      resume=not args.no_resume, progress=not args.quiet, scheduler=args.scheduler,
                      batch_size=args.batch_size, invalid=rs.invalid, max_depth=rs.max_depth, vis=args.vis,
-                     uncertainty=args.uncertainty)
+                     uncertainty=args.uncertainty, distortion=rs.distortion)
     print(f"{args.output}: {s.planned} frames by {method} ({s.written} computed, {s.skipped} done "
           f"before) in {s.seconds:.1f} s")
     if s.not_depth:
@@ -219,12 +240,15 @@ def estimate_file(depth_path: Path, intrinsics_path: Path, output: Path, *,
                   shape: tuple[int, int] | None = None,
                   options: dict[str, Any] | None = None, invalid: tuple[float, ...] = (),
                   max_depth: float | None = None, vis: str = "3f2n",
-                  uncertainty: bool = False) -> EstimateReport:
+                  uncertainty: bool = False,
+                  distortion: tuple[float, ...] = ()) -> EstimateReport:
     """Read one depth file and its intrinsics, estimate the normals, write them atomically.
 
     With ``uncertainty``, the expected angular error of every normal goes to
     ``<name>.uncertainty.npy`` beside ``output`` (:func:`depthnormals.jobs.uncertainty_path`),
     and a ``.ply`` output carries it per point (``float uncertainty``, :func:`depthnormals.io.write_ply`).
+    With ``distortion`` (OpenCV's order) the depth is first resampled onto the pinhole grid of
+    the intrinsics (:func:`depthnormals.undistort_depth`); the outputs are on that grid.
 
     The normals are written even when none is finite (``valid_normals == 0`` in the report
     says so; ``valid_depth == 0`` when no depth pixel is valid). The output's folder is
@@ -245,6 +269,10 @@ def estimate_file(depth_path: Path, intrinsics_path: Path, output: Path, *,
         raise ValueError(f"{depth_path} holds a {depth.shape[0]} x {depth.shape[1]} depth map; "
                          f"--shape says {shape[0]} x {shape[1]}")
     K = read_intrinsics(intrinsics_path)
+    if distortion:
+        from ..camera import undistort_depth
+
+        depth = undistort_depth(depth, K, distortion)
     method = method or DEFAULT_METHOD
     t0 = time.perf_counter()
     try:
@@ -297,7 +325,7 @@ def run(args: argparse.Namespace) -> int:
     rep = estimate_file(args.depth, args.intrinsics, args.output, method=args.method,
                         depth_scale=rs.depth_scale, shape=args.shape,
                         options=parse_options(args.option), invalid=rs.invalid, max_depth=rs.max_depth,
-                        vis=args.vis, uncertainty=args.uncertainty)
+                        vis=args.vis, uncertainty=args.uncertainty, distortion=rs.distortion)
     print(f"{rep.output}: {rep.shape[1]}x{rep.shape[0]} normals by {rep.method} "
           f"({rep.valid_normals} valid pixels, {rep.ms:.1f} ms)")
     if rep.valid_normals == 0:

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from .._png import read_png
-from ..camera import Intrinsics
+from ..camera import Intrinsics, check_distortion, undistort_depth
 from ..io import read_npy, read_pgm
 from ._common import depth_mask, resolve_intrinsics
 from ._frame import Frame
@@ -195,9 +195,22 @@ def _to_metres(raw: np.ndarray, encoding: str, scale: float, invalid: list[float
     return z
 
 
+def _distortion_of(info: dict, folder: Path) -> tuple[float, ...]:
+    """The ``distortion`` of an ``intrinsics.json`` (OpenCV's order), () when absent or all 0."""
+    given = info.get("distortion")
+    if given is None:
+        return ()
+    try:
+        dist = check_distortion(given)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{folder / _JSON}: {exc}") from exc
+    return dist if any(dist) else ()
+
+
 def _folder_frames(folder: Path, group: str, intrinsics: Any,
-                   depth_scale: float | None) -> Iterator[Frame]:
+                   depth_scale: float | None, undistort: bool) -> Iterator[Frame]:
     info = _read_json(folder)
+    dist = _distortion_of(info, folder) if undistort else ()
     encoding = encoding_of(info)
     presets = {k: Intrinsics(v["fx"], v["fy"], v["cx"], v["cy"]) for k, v in info.items()
                if isinstance(v, dict) and all(x in v for x in ("fx", "fy", "cx", "cy"))}
@@ -212,10 +225,13 @@ def _folder_frames(folder: Path, group: str, intrinsics: Any,
         if raw is None:
             continue
         depth = _to_metres(raw, encoding, scale, invalid)
+        if dist:  # onto the pinhole grid (nearest: no blend across jumps); 0 where it leaves
+            depth = np.nan_to_num(undistort_depth(depth, cam, dist), nan=0.0)
         meta = {"format": "realsensors", "depth_file": str(file), "encoding": encoding,
                 "depth_scale": None if encoding == "nyu_raw_disparity" else scale,
                 "sensor": str(info.get("sensor", "")),
-                "intrinsics": "given" if intrinsics is not None else _JSON}
+                "intrinsics": "given" if intrinsics is not None else _JSON,
+                "undistorted": list(dist) if dist else None}
         if "plane_threshold" in info:
             meta["plane_threshold"] = [float(t) for t in info["plane_threshold"]]
         yield Frame(depth=depth, normals=None, K=cam.matrix, mask=depth_mask(depth),
@@ -223,7 +239,7 @@ def _folder_frames(folder: Path, group: str, intrinsics: Any,
 
 
 def read_realsensors(path: str | Path, *, intrinsics: Any = None,
-                     depth_scale: float | None = None) -> Iterator[Frame]:
+                     depth_scale: float | None = None, undistort: bool = True) -> Iterator[Frame]:
     """Yield the frames of a real sensor folder (or of a folder of them).
 
     Parameters
@@ -238,13 +254,20 @@ def read_realsensors(path: str | Path, *, intrinsics: Any = None,
     depth_scale : float, optional
         Metres per stored unit of integer files; overrides ``intrinsics.json``'s
         ``depth_scale`` (default there: 0.001).
+    undistort : bool, default True
+        Where ``intrinsics.json`` gives the lens's ``distortion`` (OpenCV's order ``k1, k2, p1,
+        p2[, k3[, k4, k5, k6[, s1, s2, s3, s4]]]``), resample each frame onto the pinhole grid
+        of its camera (:func:`depthnormals.undistort_depth`; nearest pixel, 0 where the ray
+        leaves the image); False keeps the stored grid (the estimators then read it as a
+        pinhole image).
 
     Yields
     ------
     Frame
         Depth in metres (float32, 0 = invalid), ``normals=None``, K, ``mask`` = valid depth,
         ``name`` = file stem, ``group`` = the folder's name (its path relative to ``path``
-        for a folder of folders), ``meta`` with the file, encoding, scale and sensor text.
+        for a folder of folders), ``meta`` with the file, encoding, scale, sensor text and
+        the distortion undone (``"undistorted"``, None when none).
 
     Notes
     -----
@@ -270,7 +293,7 @@ def read_realsensors(path: str | Path, *, intrinsics: Any = None,
     if not root.is_dir():
         raise FileNotFoundError(f"real sensor folder {root} does not exist")
     if _is_folder(root):
-        yield from _folder_frames(root, root.name, intrinsics, depth_scale)
+        yield from _folder_frames(root, root.name, intrinsics, depth_scale, undistort)
         return
     folders = sorted(c for c in root.iterdir() if c.is_dir() and _is_folder(c))
     if not folders:
@@ -278,4 +301,4 @@ def read_realsensors(path: str | Path, *, intrinsics: Any = None,
                          "(at the top or in depth/), here or in a sub-folder")
     for folder in folders:
         yield from _folder_frames(folder, folder.relative_to(root).as_posix(), intrinsics,
-                                  depth_scale)
+                                  depth_scale, undistort)
