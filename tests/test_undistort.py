@@ -237,3 +237,33 @@ def test_cli_refuses_a_bad_distortion(tmp_path, capsys):
         main(["estimate", "x.npy", "-K", "1,1,0,0", "-o", str(tmp_path / "n.npy"),
               "--distortion", "0.1,0.2"])
     assert "4, 5, 8 or 12" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------------------------
+# the torch twin
+
+
+def test_torch_twin_gives_the_numpy_pixels():
+    torch = pytest.importorskip("torch")
+    from depthnormals.torch import undistort_depth as tundistort
+
+    raw = raw_depth().astype(np.float32) * np.float32(0.001)
+    want = dn.undistort_depth(raw, K, DIST)
+    batch = torch.stack([torch.from_numpy(raw), torch.from_numpy(raw * 2)])[:, None]
+    got = tundistort(batch, K, DIST)
+    assert got.shape == batch.shape and got.dtype == torch.float32
+    np.testing.assert_array_equal(got[0, 0].numpy(), want)
+    np.testing.assert_array_equal(got[1, 0].numpy(), dn.undistort_depth(raw * 2, K, DIST))
+    np.testing.assert_array_equal(tundistort(torch.from_numpy(raw).double(), K, DIST).numpy(),
+                                  want.astype(np.float64))
+    # differentiable in the depth: each output value is one input value
+    x = torch.from_numpy(raw).clone().requires_grad_(True)
+    y = tundistort(x, K, DIST)
+    torch.nan_to_num(y).sum().backward()
+    assert x.grad is not None and float(x.grad.sum()) == float(np.count_nonzero(np.isfinite(want)))
+    with pytest.raises(TypeError, match=r"torch\.Tensor"):
+        tundistort(raw, K, DIST)
+    with pytest.raises(TypeError, match="floating"):
+        tundistort(torch.zeros(4, 4, dtype=torch.int32), K, DIST)
+    with pytest.raises(ValueError, match="4, 5, 8 or 12"):
+        tundistort(torch.zeros(4, 4), K, (0.1,))
