@@ -267,3 +267,44 @@ def test_torch_twin_gives_the_numpy_pixels():
         tundistort(torch.zeros(4, 4, dtype=torch.int32), K, DIST)
     with pytest.raises(ValueError, match="4, 5, 8 or 12"):
         tundistort(torch.zeros(4, 4), K, (0.1,))
+
+
+def test_a_ros_camera_info_distortion_is_named_not_applied(tmp_path, capsys):
+    """ROS depth topics are taken as rectified (image_rect): the ``D`` of a camera_info is not
+    applied, but the command line says it is there and how to apply it (an image_raw stream
+    read without it would be silently off)."""
+    from depthnormals.cli import main
+    from depthnormals.io import read_camera_file
+
+    pytest.importorskip("yaml")
+    src = tmp_path / "frame.npy"
+    np.save(src, raw_depth())
+    data = ", ".join(f"{c!r}" for c in DIST)
+    cam = tmp_path / "depth.yaml"
+    cam.write_text(
+        "image_width: 640\nimage_height: 576\ncamera_name: depth\n"
+        f"camera_matrix:\n  rows: 3\n  cols: 3\n  data: [{K[0]!r}, 0.0, {K[2]!r}, 0.0, {K[1]!r}, "
+        f"{K[3]!r}, 0.0, 0.0, 1.0]\n"
+        f"distortion_model: rational_polynomial\ndistortion_coefficients:\n  rows: 1\n  cols: 8\n"
+        f"  data: [{data}]\n")
+    info = read_camera_file(cam)
+    assert info.ros_distortion == DIST and info.distortion == ()
+    capsys.readouterr()
+    assert main(["estimate", str(src), "-K", str(cam), "--depth-scale", "0.001", "-o",
+                 str(tmp_path / "n.npy")]) == 0
+    err = capsys.readouterr().err
+    assert "not applied" in err and "--distortion 0.5479397774,-0.02097137086," in err
+    np.testing.assert_array_equal(np.load(tmp_path / "n.npy"),
+                                  dn.estimate_normals(raw_depth(), K, depth_scale=0.001))
+    # given explicitly: applied, and no note
+    assert main(["estimate", str(src), "-K", str(cam), "--depth-scale", "0.001", "-o",
+                 str(tmp_path / "m.npy"), "--distortion", ",".join(repr(c) for c in DIST)]) == 0
+    assert "not applied" not in capsys.readouterr().err
+    np.testing.assert_array_equal(np.load(tmp_path / "m.npy"), dn.estimate_normals(
+        dn.undistort_depth(raw_depth(), K, DIST), K, depth_scale=0.001))
+    # zeros (most depth cameras' camera_info), or a fisheye model: nothing to say
+    cam.write_text(cam.read_text().replace(f"data: [{data}]", "data: [0, 0, 0, 0, 0, 0, 0, 0]"))
+    assert read_camera_file(cam).ros_distortion == ()
+    cam.write_text(cam.read_text().replace("rational_polynomial", "equidistant").replace(
+        "data: [0, 0, 0, 0, 0, 0, 0, 0]", "data: [0.1, 0.01, 0.0, 0.0]"))
+    assert read_camera_file(cam).ros_distortion == ()

@@ -389,8 +389,13 @@ class CameraFile:
         The lens's distortion in OpenCV's order (key ``distortion``: ``[k1, k2, p1, p2[, k3[,
         k4, k5, k6[, s1, s2, s3, s4]]]]``; () when absent or all 0): the command line
         resamples each depth image onto the pinhole grid of ``K`` first
-        (:func:`depthnormals.undistort_depth`). A ROS ``camera_info``'s ``D`` is not read (its
-        depth topics are taken as rectified, ``image_rect``).
+        (:func:`depthnormals.undistort_depth`).
+    ros_distortion : tuple of float
+        A ROS ``camera_info``'s non-zero ``D`` (``D`` / ``d`` / ``distortion_coefficients``,
+        model ``plumb_bob`` or ``rational_polynomial``), which is **not** applied: ROS depth
+        topics are taken as rectified (``image_rect``); the command line says so and names
+        ``--distortion`` for an ``image_raw`` stream. () when absent, all 0, or of another
+        model.
     """
 
     K: Intrinsics
@@ -401,6 +406,7 @@ class CameraFile:
     encoding: str | None = None
     raw_format: str | None = None
     distortion: tuple[float, ...] = ()
+    ros_distortion: tuple[float, ...] = ()
 
 
 def read_camera_file(path: str | Path) -> CameraFile:
@@ -417,7 +423,9 @@ def read_camera_file(path: str | Path) -> CameraFile:
     - ROS ``camera_info`` YAML (``camera_calibration_parsers``: ``camera_matrix: {rows: 3,
       cols: 3, data: [...]}``, else ``projection_matrix``), and a ``camera_info`` message
       as ``rostopic echo`` / ``ros2 topic echo`` print it (``K: [...]`` / ``k: [...]``).
-      Distortion coefficients are ignored: the depth is taken as rectified.
+      Its distortion coefficients are not applied (the depth is taken as rectified,
+      ``image_rect``); non-zero ones are kept in ``ros_distortion`` so the command line
+      can say so.
     - Open3D's ``PinholeCameraIntrinsic`` JSON (``intrinsic_matrix``, 9 values, column-major,
       as ``open3d.io.write_pinhole_camera_intrinsic`` writes it).
     - Text (``.txt``): 9 numbers are a 3x3 ``K``, 12 a 3x4 ``P`` (row-major), 4 or 5 the 3F2N
@@ -552,7 +560,23 @@ def _mapping_camera(data: dict, path: Path) -> CameraFile:
     dist = extras.get("distortion")
     dist = () if dist is None else check_distortion(dist, '"distortion"')
     return CameraFile(K, scale, codes, max_depth, path, encoding,
-                      None if raw_format is None else str(raw_format), dist if any(dist) else ())
+                      None if raw_format is None else str(raw_format), dist if any(dist) else (),
+                      _ros_distortion(data))
+
+
+def _ros_distortion(data: dict) -> tuple[float, ...]:
+    """A ROS ``camera_info``'s ``D`` when non-zero and of OpenCV's models, else ()."""
+    model = str(data.get("distortion_model", "plumb_bob")).lower()
+    value = next((data[k] for k in ("D", "d", "distortion_coefficients") if k in data), None)
+    if value is None or model not in ("plumb_bob", "rational_polynomial"):
+        return ()
+    if isinstance(value, dict):
+        value = value.get("data", ())
+    try:
+        d = check_distortion(value)
+    except (TypeError, ValueError):
+        return ()
+    return d if any(d) else ()
 
 
 _EXTRAS = ("depth_scale", "invalid", "invalid_value", "max_depth", "encoding", "raw_format",

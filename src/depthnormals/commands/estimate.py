@@ -164,6 +164,12 @@ def read_settings(args: argparse.Namespace, camera: Any) -> ReadSettings:
     check_positive(scale, "--depth-scale", allow_none=True)
     check_positive(max_depth, "--max-depth", allow_none=True)
     dist = args.distortion if args.distortion is not None else getattr(camera, "distortion", ())
+    ros = getattr(camera, "ros_distortion", ())
+    if ros and args.distortion is None and not dist:
+        print(f"depthnormals estimate: note: {camera.source} gives the lens distortion D = "
+              f"{list(ros)} (ROS camera_info), which is not applied: ROS depth topics are taken as "
+              "rectified (image_rect); for an image_raw stream pass --distortion "
+              f"{','.join(format(c, '.10g') for c in ros)}", file=sys.stderr)
     return ReadSettings(scale, tuple(invalid), max_depth, tuple(dist) if any(dist) else ())
 
 
