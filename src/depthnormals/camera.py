@@ -257,7 +257,8 @@ def undistort_depth(depth: Any, K: Any, distortion: Any, *, interpolation: str =
     ----------
     depth : array_like, shape (H, W)
         Depth in any unit and dtype (integers keep their codes under ``"nearest"``: an invalid
-        code stays one).
+        code stays one; ``"linear"`` reads 0, negative, NaN and inf as invalid, so mask other
+        codes such as 65535 first).
     K : Intrinsics, array (3, 3) or (fx, fy, cx, cy)
         The camera matrix of the distorted image (pixels, 0-based pixel centres); the output
         uses the same one.

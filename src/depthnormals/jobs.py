@@ -149,7 +149,8 @@ def _depth_files(folder: Path) -> list[Path]:
 
 
 def _dataset_frames(folder: Path) -> Iterator[Any] | None:
-    """The frames of a dataset folder, or None when it holds no known dataset layout."""
+    """The frames of a dataset folder (or file: a ROS bag, NYU's ``.mat``), or None when it
+    holds no known dataset layout."""
     from . import datasets
 
     frames = iter(datasets.open(folder))
@@ -240,6 +241,12 @@ def plan_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, K: Any =
             rel = p.relative_to(root) if p.is_relative_to(root) else Path(p.name)
             yield job(out / f"{_stem(rel)}.{fmt}", str(p), K=cam, source=p.absolute(), label=str(rel))
 
+    def dataset(frames: Iterable[Any], path: Path) -> Iterator[EstimateJob]:
+        for f in frames:
+            rel = f"{f.group}/{f.name}" if f.group else f.name
+            yield job(out / f"{rel}.{fmt}", f"{path}:{rel}", K=as_intrinsics(f.K), depth=f.depth,
+                      label=rel)
+
     for item in inputs:
         text = str(item)
         path = Path(text)
@@ -254,7 +261,12 @@ def plan_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, K: Any =
                                  "(colour images or other arrays)")
             yield from files(kept, _glob_root(text))
         elif path.is_file():
-            yield from files([path], path.parent)
+            # a file that is no depth image may be a dataset (a ROS bag, NYU's labeled .mat)
+            frames = None if path.suffix.lower() in DEPTH_SUFFIXES else _dataset_frames(path)
+            if frames is None:
+                yield from files([path], path.parent)
+            else:
+                yield from dataset(frames, path)
         elif path.is_dir():
             frames = _dataset_frames(path)
             if frames is None:
@@ -268,10 +280,7 @@ def plan_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, K: Any =
                                      "them a depth image (colour images or other arrays)")
                 yield from files(kept, path)
                 continue
-            for f in frames:
-                rel = f"{f.group}/{f.name}" if f.group else f.name
-                yield job(out / f"{rel}.{fmt}", f"{path}:{rel}", K=as_intrinsics(f.K), depth=f.depth,
-                          label=rel)
+            yield from dataset(frames, path)
         else:
             raise FileNotFoundError(f"input {text} does not exist")
 

@@ -30,8 +30,9 @@ FIRST_RUN_S = 12
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("depth", type=Path, nargs="+",
                         help="depth file: .npy, .png (16-bit), .pgm (NYU raw), .tif, .bin; or many: files, "
-                             "globs ('seq/*.png'), folders, dataset folders (then -o is a folder; "
-                             "colour images found there are skipped and counted)")
+                             "globs ('seq/*.png'), folders, dataset folders or files (a ROS bag, "
+                             "a RealSense recording) (then -o is a folder; colour images found "
+                             "there are skipped and counted)")
     parser.add_argument("--intrinsics", "-K", type=Path, default=None,
                         help="camera file: .json/.yaml (fx, fy, cx, cy, K or P; ROS camera_info; Open3D "
                              "intrinsic_matrix; optional depth_scale, invalid, max_depth) or .txt (3x3 K, "
@@ -132,9 +133,25 @@ def parse_options(items: list[str]) -> dict:
 
 
 def _many(args: argparse.Namespace) -> bool:
-    """The many-frames form: several inputs, a folder or glob, a scheduler, or -o an existing folder."""
+    """The many-frames form: several inputs, a folder or glob, a dataset file (a ROS bag, NYU's
+    labeled ``.mat``), a scheduler, or -o an existing folder."""
     return (len(args.depth) > 1 or args.depth[0].is_dir() or args.output.is_dir()
-            or args.scheduler is not None or any(c in str(args.depth[0]) for c in "*?["))
+            or args.scheduler is not None or any(c in str(args.depth[0]) for c in "*?[")
+            or _dataset_file(args.depth[0]))
+
+
+def _dataset_file(path: Path) -> bool:
+    """A file with no depth image's suffix that a dataset reader takes."""
+    from .. import datasets
+    from ..io import DEPTH_SUFFIXES
+
+    if not path.is_file() or path.suffix.lower() in DEPTH_SUFFIXES:
+        return False
+    try:
+        datasets.detect_format(path)
+    except ValueError:
+        return False
+    return True
 
 
 @dataclass(frozen=True)

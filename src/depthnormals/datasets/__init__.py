@@ -12,6 +12,7 @@ from .kitti import is_kitti, read_kitti
 from .nyu import is_nyu, read_nyu
 from .realsensors import is_realsensors, read_realsensors
 from .replica import REPLICA_INTRINSICS, is_replica, read_replica
+from .rosbag import is_rosbag, read_rosbag
 from .scannet import is_scannet, read_scannet
 from .ssn import is_ssn, read_ssn
 from .synthetic import is_synthetic, read_synthetic
@@ -31,6 +32,7 @@ __all__ = [
     "read_nyu",
     "read_realsensors",
     "read_replica",
+    "read_rosbag",
     "read_scannet",
     "read_ssn",
     "read_synthetic",
@@ -48,6 +50,7 @@ _READERS: dict[str, tuple[Any, Any, tuple[str, ...]]] = {
     "nyu": (is_nyu, read_nyu, ("intrinsics",)),
     "hypersim": (is_hypersim, read_hypersim, ()),
     "replica": (is_replica, read_replica, ("intrinsics", "depth_scale")),
+    "rosbag": (is_rosbag, read_rosbag, ("intrinsics", "depth_scale")),
     "realsensors": (is_realsensors, read_realsensors, ("intrinsics", "depth_scale")),
 }
 #: The format names :func:`open` accepts as ``format=``, in detection order.
@@ -112,7 +115,8 @@ def detect_format(path: str | Path) -> str:
         "ScanNet export (depth/*.png + intrinsic/intrinsic_depth.txt), KITTI depth (proj_depth/ "
         "or groundtruth_depth/ + intrinsics/), NYU Depth v2 labeled .mat (HDF5 with 'depths'), "
         "Hypersim (*_geometry_hdf5/frame.IIII.depth_meters.hdf5), Replica renders as NICE-SLAM "
-        "publishes them (results/depth*.png), real sensor folders (intrinsics.json + depth "
+        "publishes them (results/depth*.png), ROS bags (a ROS 1 .bag file or a ROS 2 bag "
+        "folder with depth images), real sensor folders (intrinsics.json + depth "
         "images, or a folder of them); pass format= to force one"
     )
 
@@ -149,6 +153,9 @@ def open(path: str | Path, *, format: str | None = None, intrinsics: Any = None,
       Replica renders (NICE-SLAM layout):
       see docs/datasets.md and each reader. Their frames carry ``normals=None`` when the
       dataset has no ground-truth normals (all but Hypersim);
+    - a ROS bag (a ROS 1 ``.bag`` file, the RealSense Viewer's recordings among them, or a
+      ROS 2 bag folder) with depth images: :func:`read_rosbag` (needs the ``rosbags``
+      package), groups the depth topics;
     - last, a real sensor folder (``intrinsics.json`` + depth images at the top or in
       ``depth/``, or a folder of them: :func:`read_realsensors`), groups the folder names.
 

@@ -1,0 +1,235 @@
+"""Reader of depth images recorded in ROS bags: ROS 1 ``.bag`` files (the RealSense Viewer's
+recordings among them) and ROS 2 bag folders, through the ``rosbags`` library (``pip install
+'depthnormals[ros]'``; pure Python, no ROS installation).
+
+A depth topic is one of ``sensor_msgs/Image`` whose messages are ``16UC1`` / ``mono16``
+(millimetres, REP 118) or ``32FC1`` (metres); its camera is the ``sensor_msgs/CameraInfo``
+topic that shares the longest leading part of its name (``/camera/depth/image_rect_raw`` and
+``/camera/depth/camera_info``; the RealSense layout ``/device_0/sensor_0/Depth_0/image/data``
+and ``/device_0/sensor_0/Depth_0/info/camera_info``). A RealSense recording's ``Depth Units``
+option of the same sensor gives the scale of its 16-bit depth (0.001 by default, 0.0001 on the
+high-resolution presets). The camera's distortion is undone (:func:`depthnormals.undistort_depth`)
+when it is OpenCV's model (``plumb_bob``, ``rational_polynomial``, RealSense's ``Brown
+Conrady``) with a non-zero coefficient and the topic is not a rectified one (``rect`` in its
+name): ROS's ``image_raw`` topics are distorted, ``image_rect`` ones are not.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..camera import Intrinsics, check_distortion, undistort_depth
+from ._common import depth_mask, resolve_intrinsics
+from ._frame import Frame
+
+__all__ = ["DEPTH_ENCODINGS", "is_rosbag", "read_rosbag"]
+
+#: Image encodings read as depth, with the metres per stored unit of each (REP 118); a
+#: RealSense recording's ``Depth Units`` option overrides the 16-bit ones' scale.
+DEPTH_ENCODINGS = {"16UC1": 0.001, "mono16": 0.001, "32FC1": 1.0}
+#: Distortion models that :func:`depthnormals.undistort_depth` undoes (OpenCV's).
+OPENCV_MODELS = ("plumb_bob", "rational_polynomial", "brown conrady", "brown_conrady")
+_ROS1_MAGIC = b"#ROSBAG V2.0\n"
+
+
+def _anyreader() -> Any:
+    try:
+        from rosbags.highlevel import AnyReader
+    except ImportError as exc:
+        raise ImportError("reading ROS bags needs the rosbags package: pip install "
+                          "'depthnormals[ros]' (or pip install rosbags)") from exc
+    return AnyReader
+
+
+def is_rosbag(path: str | Path) -> bool:
+    """True for a ROS 1 bag file (``#ROSBAG V2.0`` header) or a ROS 2 bag folder
+    (``metadata.yaml`` beside ``.db3`` / ``.mcap`` storage)."""
+    p = Path(path)
+    if p.is_file():
+        with p.open("rb") as fh:
+            return fh.read(len(_ROS1_MAGIC)) == _ROS1_MAGIC
+    return (p.is_dir() and (p / "metadata.yaml").is_file()
+            and any(q.suffix in (".db3", ".mcap") for q in p.iterdir()))
+
+
+def _field(msg: Any, name: str) -> Any:
+    """A message field by its ROS 1 (``K``) or ROS 2 (``k``) spelling."""
+    for key in (name, name.lower(), name.upper()):
+        if hasattr(msg, key):
+            return getattr(msg, key)
+    raise AttributeError(name)
+
+
+def _segments(topic: str) -> list[str]:
+    return [s for s in topic.split("/") if s]
+
+
+def _shared(a: str, b: str) -> int:
+    """How many leading name segments two topics share."""
+    n = 0
+    for x, y in zip(_segments(a), _segments(b), strict=False):
+        if x != y:
+            break
+        n += 1
+    return n
+
+
+def _partner(topic: str, candidates: list[str]) -> str | None:
+    """The candidate topic sharing most leading segments with ``topic`` (at least one), the
+    first of equals in name order; None when none shares any."""
+    best, score = None, 0
+    for c in sorted(candidates):
+        s = _shared(topic, c)
+        if s > score:
+            best, score = c, s
+    return best
+
+
+def _image(msg: Any, topic: str) -> np.ndarray:
+    """A depth image message as a 2-D array of its stored type (native byte order)."""
+    enc = str(msg.encoding)
+    dtype = np.dtype(np.float32 if enc == "32FC1" else np.uint16)
+    dtype = dtype.newbyteorder(">" if msg.is_bigendian else "<")
+    h, w, step = int(msg.height), int(msg.width), int(msg.step)
+    data = np.frombuffer(bytes(msg.data), dtype=np.uint8)
+    if step < w * dtype.itemsize or data.size < h * step:
+        raise ValueError(f"{topic}: a {enc} image message of {w} x {h} with step {step} holds "
+                         f"{data.size} bytes; expected {h * step}")
+    rows = data[:h * step].reshape(h, step)[:, :w * dtype.itemsize]
+    return np.ascontiguousarray(rows).view(dtype).reshape(h, w).astype(dtype.newbyteorder("="))
+
+
+def _camera(msg: Any) -> tuple[Intrinsics, tuple[float, ...], str]:
+    """(K, distortion or (), model) of a CameraInfo message."""
+    k = np.asarray(_field(msg, "K"), dtype=np.float64).reshape(3, 3)
+    cam = Intrinsics(k[0, 0], k[1, 1], k[0, 2], k[1, 2])
+    model = str(_field(msg, "distortion_model")).strip()
+    d = np.asarray(_field(msg, "D"), dtype=np.float64).reshape(-1)
+    dist = tuple(float(x) for x in d) if d.size and np.any(d != 0) else ()
+    return cam, dist, model
+
+
+def read_rosbag(path: str | Path, *, topic: str | None = None, intrinsics: Any = None,
+                depth_scale: float | None = None, undistort: bool = True) -> Iterator[Frame]:
+    """Yield the depth frames of a ROS bag (ROS 1 ``.bag`` file or ROS 2 bag folder).
+
+    Parameters
+    ----------
+    path : str or Path
+        The bag.
+    topic : str, optional
+        The depth topic to read; default every depth topic (module doc), in name order.
+    intrinsics : Intrinsics, (fx, fy, cx, cy), 3x3 array or path, optional
+        The camera, instead of the topic's ``CameraInfo`` (required where it has none).
+    depth_scale : float, optional
+        Metres per stored unit of 16-bit depth, instead of the recording's (RealSense
+        ``Depth Units``) or REP 118's 0.001. ``32FC1`` depth is metres.
+    undistort : bool, default True
+        Undo the camera's distortion where the module doc says it applies; False reads every
+        image as a pinhole one.
+
+    Yields
+    ------
+    Frame
+        Depth in metres (float32, 0 = invalid: 0, NaN, inf and negative stored values),
+        ``normals=None``, K, ``mask`` = valid depth, ``name`` = the message's index in its
+        topic (``"000000"``, ...), ``group`` = the topic, ``meta`` with the topic, the
+        message's bag time (ns), encoding, scale, distortion model and the distortion undone
+        (``"undistorted"``, None when none).
+
+    Raises
+    ------
+    ImportError
+        Without the ``rosbags`` package.
+    ValueError
+        No depth topic (or ``topic`` is not one), a depth topic without a camera and no
+        ``intrinsics``, a distortion of another model than OpenCV's where it would apply, or a
+        malformed image message.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise FileNotFoundError(f"ROS bag {p} does not exist")
+    with _anyreader()([p]) as reader:
+        conns = reader.connections
+        images = sorted({c.topic for c in conns if c.msgtype == "sensor_msgs/msg/Image"})
+        infos = sorted({c.topic for c in conns if c.msgtype == "sensor_msgs/msg/CameraInfo"})
+        units = [c for c in conns if c.topic.endswith("/option/Depth Units/value")]
+        depth_topics = [t for t in images if _first_encoding(reader, conns, t) in DEPTH_ENCODINGS]
+        if topic is not None:
+            if topic not in depth_topics:
+                raise ValueError(f"{p}: {topic!r} is not a depth topic of this bag (16UC1, mono16 "
+                                 f"or 32FC1 images); its depth topics: {', '.join(depth_topics) or 'none'}")
+            depth_topics = [topic]
+        if not depth_topics:
+            raise ValueError(f"{p}: no depth topic (sensor_msgs/Image of 16UC1, mono16 or 32FC1); "
+                             f"its image topics: {', '.join(images) or 'none'}")
+        for t in depth_topics:
+            yield from _topic_frames(reader, conns, p, t, infos, units, intrinsics, depth_scale,
+                                     undistort)
+
+
+def _first_encoding(reader: Any, conns: list, topic: str) -> str | None:
+    for c, _, raw in reader.messages(connections=[c for c in conns if c.topic == topic]):
+        return str(reader.deserialize(raw, c.msgtype).encoding)
+    return None
+
+
+def _one(reader: Any, conns: list, topic: str) -> Any:
+    """The first message of ``topic``, deserialised (None when it has none)."""
+    for c, _, raw in reader.messages(connections=[c for c in conns if c.topic == topic]):
+        return reader.deserialize(raw, c.msgtype)
+    return None
+
+
+def _topic_frames(reader: Any, conns: list, p: Path, topic: str, infos: list[str], units: list,
+                  intrinsics: Any, depth_scale: float | None, undistort: bool) -> Iterator[Frame]:
+    info_topic = _partner(topic, infos)
+    dist: tuple[float, ...] = ()
+    model = ""
+    if intrinsics is not None:
+        cam = resolve_intrinsics(intrinsics, {}, what=f"{p}:{topic}")
+    elif info_topic is not None and (msg := _one(reader, conns, info_topic)) is not None:
+        cam, dist, model = _camera(msg)
+    else:
+        raise ValueError(f"{p}: depth topic {topic} has no CameraInfo topic beside it; pass "
+                         "intrinsics=")
+    rectified = "rect" in topic.lower()
+    if dist and undistort and not rectified:
+        if model.lower() not in OPENCV_MODELS:
+            raise ValueError(f"{p}: {info_topic} gives a {model!r} distortion {list(dist)}, which "
+                             "depthnormals.undistort_depth cannot undo (OpenCV's plumb_bob / "
+                             "rational_polynomial only); pass undistort=False to read the images "
+                             "as pinhole ones")
+        try:
+            dist = check_distortion(dist)
+        except ValueError as exc:
+            raise ValueError(f"{p}: {info_topic}: {exc}") from exc
+    else:
+        dist = ()
+    unit_scale = None
+    mine = [u for u in units if _shared(u.topic, topic) >= 2]  # the same device and sensor
+    if mine:
+        msg = _one(reader, conns, mine[0].topic)
+        unit_scale = float(msg.data) if msg is not None and float(msg.data) > 0 else None
+    n = 0
+    for c, stamp, raw in reader.messages(connections=[c for c in conns if c.topic == topic]):
+        msg = reader.deserialize(raw, c.msgtype)
+        enc = str(msg.encoding)
+        if enc not in DEPTH_ENCODINGS:
+            raise ValueError(f"{p}: message {n} of {topic} is {enc}, not depth (16UC1, mono16, 32FC1)")
+        stored = _image(msg, topic)
+        scale = 1.0 if enc == "32FC1" else float(depth_scale or unit_scale or DEPTH_ENCODINGS[enc])
+        z = stored.astype(np.float64) * scale
+        z = np.where(np.isfinite(z) & (z > 0), z, 0.0).astype(np.float32)
+        if dist:
+            z = np.nan_to_num(undistort_depth(z, cam, dist), nan=0.0)
+        meta = {"format": "rosbag", "bag": str(p), "topic": topic, "stamp_ns": int(stamp),
+                "encoding": enc, "depth_scale": scale, "camera_info": info_topic,
+                "distortion_model": model or None, "undistorted": list(dist) if dist else None}
+        yield Frame(depth=z, normals=None, K=cam.matrix, mask=depth_mask(z), name=f"{n:06d}",
+                    group=topic.strip("/"), meta=meta)
+        n += 1
