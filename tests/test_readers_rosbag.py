@@ -78,7 +78,7 @@ class Bag:
             is_bigendian=int(big), step=rows.shape[1], data=rows.reshape(-1))
         self.write(topic, msg)
 
-    def camera(self, topic: str, shape, cam=K, dist=(0.0,) * 5, model="plumb_bob"):
+    def camera(self, topic: str, shape, cam=K, dist=(0.0,) * 5, model="plumb_bob", binning=0):
         T = self.ts.types
         fx, fy, cx, cy = cam
         kk = np.array([fx, 0, cx, 0, fy, cy, 0, 0, 1], float)
@@ -90,7 +90,7 @@ class Bag:
                                                     do_rectify=False)
         self.write(topic, T["sensor_msgs/msg/CameraInfo"](
             header=self._header(), height=shape[0], width=shape[1], distortion_model=model,
-            binning_x=0, binning_y=0, roi=roi, **fields))
+            binning_x=binning, binning_y=binning, roi=roi, **fields))
 
     def float32(self, topic: str, value: float):
         self.write(topic, self.ts.types["std_msgs/msg/Float32"](data=value))
@@ -212,6 +212,19 @@ def test_errors_name_the_bag_and_what_is_missing(tmp_path):
     assert len(list(read_rosbag(fisheye, undistort=False))) == 1
     with pytest.raises(FileNotFoundError):
         list(read_rosbag(tmp_path / "absent.bag"))
+    with pytest.raises(ValueError, match="depth_scale"):
+        list(read_rosbag(fisheye, depth_scale=0.0))
+    # a camera of another size, binned, or uncalibrated (K all 0): never a silently wrong K
+    for name, kw, match in (("size", {"shape": (240, 320)}, r"640 x 480 images.*320 x 240"),
+                            ("binned", {"binning": 2}, "binned"),
+                            ("zero", {"cam": (0.0, 0.0, 0.0, 0.0)}, "uncalibrated")):
+        bag = tmp_path / f"{name}.bag"
+        with Bag(bag, 1) as b:
+            b.camera("/cam/camera_info", **{"shape": d.shape, **kw})
+            b.image("/cam/image_rect", d, "16UC1")
+        with pytest.raises(ValueError, match=match):
+            list(read_rosbag(bag))
+        assert len(list(read_rosbag(bag, intrinsics=K))) == 1
     (tmp_path / "x.bag").write_bytes(b"not a bag")
     assert not dn.datasets.rosbag.is_rosbag(tmp_path / "x.bag")
 

@@ -103,14 +103,25 @@ def _image(msg: Any, topic: str) -> np.ndarray:
     return np.ascontiguousarray(rows).view(dtype).reshape(h, w).astype(dtype.newbyteorder("="))
 
 
-def _camera(msg: Any) -> tuple[Intrinsics, tuple[float, ...], str]:
-    """(K, distortion or (), model) of a CameraInfo message."""
+def _camera(msg: Any, where: str) -> tuple[Intrinsics, tuple[float, ...], str, tuple[int, int]]:
+    """(K, distortion or (), model, (height, width) or (0, 0)) of a CameraInfo message; a
+    binned or cropped camera (``binning_x/y`` over 1, an ROI offset) and a K without focal
+    lengths (an uncalibrated camera_info) raise, naming ``where``."""
     k = np.asarray(_field(msg, "K"), dtype=np.float64).reshape(3, 3)
-    cam = Intrinsics(k[0, 0], k[1, 1], k[0, 2], k[1, 2])
+    roi = msg.roi
+    if int(msg.binning_x) > 1 or int(msg.binning_y) > 1 or int(roi.x_offset) or int(roi.y_offset):
+        raise ValueError(f"{where}: the camera is binned ({msg.binning_x} x {msg.binning_y}) or "
+                         f"cropped (offset {roi.x_offset}, {roi.y_offset}); pass intrinsics= for "
+                         "the images as stored")
+    try:
+        cam = Intrinsics(k[0, 0], k[1, 1], k[0, 2], k[1, 2])
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: K {k.reshape(-1).tolist()} is no camera ({exc}); an "
+                         "uncalibrated camera_info? pass intrinsics=") from exc
     model = str(_field(msg, "distortion_model")).strip()
     d = np.asarray(_field(msg, "D"), dtype=np.float64).reshape(-1)
     dist = tuple(float(x) for x in d) if d.size and np.any(d != 0) else ()
-    return cam, dist, model
+    return cam, dist, model, (int(msg.height), int(msg.width))
 
 
 def read_rosbag(path: str | Path, *, topic: str | None = None, intrinsics: Any = None,
@@ -150,9 +161,12 @@ def read_rosbag(path: str | Path, *, topic: str | None = None, intrinsics: Any =
         ``intrinsics``, a distortion of another model than OpenCV's where it would apply, or a
         malformed image message.
     """
+    from .._validate import check_positive
+
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"ROS bag {p} does not exist")
+    check_positive(depth_scale, "depth_scale", allow_none=True)
     with _anyreader()([p]) as reader:
         conns = reader.connections
         images = sorted({c.topic for c in conns if c.msgtype == "sensor_msgs/msg/Image"})
@@ -190,10 +204,11 @@ def _topic_frames(reader: Any, conns: list, p: Path, topic: str, infos: list[str
     info_topic = _partner(topic, infos)
     dist: tuple[float, ...] = ()
     model = ""
+    size = (0, 0)
     if intrinsics is not None:
         cam = resolve_intrinsics(intrinsics, {}, what=f"{p}:{topic}")
     elif info_topic is not None and (msg := _one(reader, conns, info_topic)) is not None:
-        cam, dist, model = _camera(msg)
+        cam, dist, model, size = _camera(msg, f"{p}: {info_topic}")
     else:
         raise ValueError(f"{p}: depth topic {topic} has no CameraInfo topic beside it; pass "
                          "intrinsics=")
@@ -222,6 +237,10 @@ def _topic_frames(reader: Any, conns: list, p: Path, topic: str, infos: list[str
         if enc not in DEPTH_ENCODINGS:
             raise ValueError(f"{p}: message {n} of {topic} is {enc}, not depth (16UC1, mono16, 32FC1)")
         stored = _image(msg, topic)
+        if size[0] and size[1] and stored.shape != size:
+            raise ValueError(f"{p}: {topic} holds {stored.shape[1]} x {stored.shape[0]} images but "
+                             f"its camera {info_topic} is {size[1]} x {size[0]}; pass intrinsics= "
+                             "for the images as stored")
         scale = 1.0 if enc == "32FC1" else float(depth_scale or unit_scale or DEPTH_ENCODINGS[enc])
         z = stored.astype(np.float64) * scale
         z = np.where(np.isfinite(z) & (z > 0), z, 0.0).astype(np.float32)
