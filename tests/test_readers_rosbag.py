@@ -92,6 +92,11 @@ class Bag:
             header=self._header(), height=shape[0], width=shape[1], distortion_model=model,
             binning_x=binning, binning_y=binning, roi=roi, **fields))
 
+    def compressed(self, topic: str, png: bytes, fmt: str, header: bytes | None):
+        data = np.frombuffer((header or b"") + png, np.uint8)
+        self.write(topic, self.ts.types["sensor_msgs/msg/CompressedImage"](
+            header=self._header(), format=fmt, data=data))
+
     def float32(self, topic: str, value: float):
         self.write(topic, self.ts.types["std_msgs/msg/Float32"](data=value))
 
@@ -241,3 +246,47 @@ def test_cli_estimates_every_frame_of_a_bag(tmp_path):
                        "device_0/sensor_0/Depth_0/image/data/000001.npy"]
     f = next(iter(read_rosbag(bag)))
     np.testing.assert_array_equal(np.load(out / written[0]), dn.estimate_normals(f.depth, f.K))
+
+
+def test_compressed_depth_topics(tmp_path):
+    """``compressed_depth_image_transport``'s PNG format: a 12-byte header (format, two
+    quantisation parameters) then a 16-bit PNG of millimetres, or for 32FC1 of the quantised
+    inverse depth ``v`` (``z = A / (v - B)``); old recordings without the header too."""
+    import struct
+
+    from depthnormals._png import encode_png
+
+    d = stored()
+    qa, qb = 100.0 * 101.0, 100.0  # the transport's quantisation (depth_quantization 100)
+    z = d.astype(np.float64) * 0.001
+    with np.errstate(divide="ignore"):
+        inv = np.where(d > 0, np.round(qa / z + qb), 0).astype(np.uint16)
+    head = struct.pack("<iff", 0, qa, qb)
+    bag = tmp_path / "c.bag"
+    with Bag(bag, 1) as b:
+        b.camera("/camera/depth/camera_info", d.shape)
+        b.compressed("/camera/depth/image_raw/compressedDepth", encode_png(d), "16UC1; compressedDepth", head)
+        b.compressed("/camera/depth/image_rect_raw/compressedDepth", encode_png(d), "16UC1; compressedDepth",
+                     None)
+        b.compressed("/camera/depth_registered/image_raw/compressedDepth", encode_png(inv),
+                     "32FC1; compressedDepth png", head)
+        b.compressed("/camera/color/image_raw/compressed", b"\xff\xd8jpeg", "jpeg", None)
+        b.compressed("/camera/depth/image_raw/compressedDepth_rvl", b"rvl", "16UC1; compressedDepth rvl",
+                     head)
+    frames = {}
+    for t in ("/camera/depth/image_raw/compressedDepth", "/camera/depth/image_rect_raw/compressedDepth",
+              "/camera/depth_registered/image_raw/compressedDepth"):
+        frames.update({f.meta["topic"]: f for f in read_rosbag(bag, topic=t)})
+    metres = (d.astype(np.float64) * 0.001).astype(np.float32)
+    np.testing.assert_array_equal(frames["/camera/depth/image_raw/compressedDepth"].depth, metres)
+    np.testing.assert_array_equal(frames["/camera/depth/image_rect_raw/compressedDepth"].depth, metres)
+    f32 = frames["/camera/depth_registered/image_raw/compressedDepth"]
+    assert f32.meta["encoding"] == "32FC1" and (f32.depth[d == 0] == 0).all()
+    # the inverse-depth quantisation: 1 step of v is z^2 / A (0.4 mm at 2 m)
+    ok = d > 0
+    assert np.abs(f32.depth[ok] - metres[ok]).max() < 0.5 * (metres[ok].max() ** 2) / qa + 1e-6
+    # every topic of the bag: the rvl one refuses, naming its codec; the jpeg is no depth topic
+    with pytest.raises(ValueError, match="rvl"):
+        list(read_rosbag(bag))
+    with pytest.raises(ValueError, match="not a depth topic"):
+        list(read_rosbag(bag, topic="/camera/color/image_raw/compressed"))

@@ -3,7 +3,12 @@ recordings among them) and ROS 2 bag folders, through the ``rosbags`` library (`
 'depthnormals[ros]'``; pure Python, no ROS installation).
 
 A depth topic is one of ``sensor_msgs/Image`` whose messages are ``16UC1`` / ``mono16``
-(millimetres, REP 118) or ``32FC1`` (metres); its camera is the ``sensor_msgs/CameraInfo``
+(millimetres, REP 118) or ``32FC1`` (metres), or of ``sensor_msgs/CompressedImage`` in
+``compressed_depth_image_transport``'s PNG format (``format`` ``"16UC1; compressedDepth"``,
+``"32FC1; compressedDepth png"``: a 12-byte header, the compression format and two
+quantisation parameters ``A, B``, then a 16-bit PNG of the millimetres, or for ``32FC1`` of
+the quantised inverse depth ``v``, ``z = A / (v - B)``, 0 = none; the ``rvl`` codec is refused);
+its camera is the ``sensor_msgs/CameraInfo``
 topic that shares the longest leading part of its name (``/camera/depth/image_rect_raw`` and
 ``/camera/depth/camera_info``; the RealSense layout ``/device_0/sensor_0/Depth_0/image/data``
 and ``/device_0/sensor_0/Depth_0/info/camera_info``). A RealSense recording's ``Depth Units``
@@ -34,6 +39,9 @@ DEPTH_ENCODINGS = {"16UC1": 0.001, "mono16": 0.001, "32FC1": 1.0}
 #: Distortion models that :func:`depthnormals.undistort_depth` undoes (OpenCV's).
 OPENCV_MODELS = ("plumb_bob", "rational_polynomial", "brown conrady", "brown_conrady")
 _ROS1_MAGIC = b"#ROSBAG V2.0\n"
+_PNG = b"\x89PNG\r\n\x1a\n"
+_IMAGE = "sensor_msgs/msg/Image"
+_COMPRESSED = "sensor_msgs/msg/CompressedImage"
 
 
 def _anyreader() -> Any:
@@ -89,8 +97,49 @@ def _partner(topic: str, candidates: list[str]) -> str | None:
     return best
 
 
+def _encoding(msg: Any) -> str | None:
+    """The depth encoding of an Image or compressedDepth CompressedImage message, else the
+    Image's encoding (None for another CompressedImage)."""
+    if hasattr(msg, "encoding"):
+        return str(msg.encoding)
+    fmt = str(msg.format)
+    if "compresseddepth" not in fmt.lower():
+        return None
+    return fmt.split(";")[0].strip()
+
+
+def _compressed_depth(msg: Any, topic: str) -> np.ndarray:
+    """The depth of a compressedDepth message: uint16 millimetres (``16UC1``) or float32
+    metres (``32FC1``, NaN where none)."""
+    from .._png import decode_png
+
+    fmt = str(msg.format)
+    if "rvl" in fmt.lower():
+        raise ValueError(f"{topic}: compressedDepth with the rvl codec ({fmt!r}) is not read (PNG "
+                         "only)")
+    data = bytes(msg.data)
+    at = 0 if data[:8] == _PNG else 12 if data[12:20] == _PNG else -1
+    if at < 0:
+        raise ValueError(f"{topic}: a compressedDepth message ({fmt!r}) without PNG data")
+    img = decode_png(data[at:], name=f"{topic} compressedDepth PNG")
+    if img.dtype != np.uint16 or img.ndim != 2:
+        raise ValueError(f"{topic}: compressedDepth PNG of {img.dtype} {img.shape}; expected 16-bit "
+                         "greyscale")
+    if _encoding(msg) != "32FC1":
+        return img
+    if at == 0:
+        raise ValueError(f"{topic}: 32FC1 compressedDepth without its quantisation header")
+    qa, qb = np.frombuffer(data[4:12], dtype="<f4").astype(np.float64)
+    v = img.astype(np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.where(v > 0, qa / (v - qb), np.nan)
+    return z.astype(np.float32)
+
+
 def _image(msg: Any, topic: str) -> np.ndarray:
     """A depth image message as a 2-D array of its stored type (native byte order)."""
+    if not hasattr(msg, "encoding"):
+        return _compressed_depth(msg, topic)
     enc = str(msg.encoding)
     dtype = np.dtype(np.float32 if enc == "32FC1" else np.uint16)
     dtype = dtype.newbyteorder(">" if msg.is_bigendian else "<")
@@ -169,18 +218,20 @@ def read_rosbag(path: str | Path, *, topic: str | None = None, intrinsics: Any =
     check_positive(depth_scale, "depth_scale", allow_none=True)
     with _anyreader()([p]) as reader:
         conns = reader.connections
-        images = sorted({c.topic for c in conns if c.msgtype == "sensor_msgs/msg/Image"})
+        images = sorted({c.topic for c in conns if c.msgtype in (_IMAGE, _COMPRESSED)})
         infos = sorted({c.topic for c in conns if c.msgtype == "sensor_msgs/msg/CameraInfo"})
         units = [c for c in conns if c.topic.endswith("/option/Depth Units/value")]
         depth_topics = [t for t in images if _first_encoding(reader, conns, t) in DEPTH_ENCODINGS]
         if topic is not None:
             if topic not in depth_topics:
                 raise ValueError(f"{p}: {topic!r} is not a depth topic of this bag (16UC1, mono16 "
-                                 f"or 32FC1 images); its depth topics: {', '.join(depth_topics) or 'none'}")
+                                 f"or 32FC1 images, or compressedDepth); its depth topics: "
+                                 f"{', '.join(depth_topics) or 'none'}")
             depth_topics = [topic]
         if not depth_topics:
-            raise ValueError(f"{p}: no depth topic (sensor_msgs/Image of 16UC1, mono16 or 32FC1); "
-                             f"its image topics: {', '.join(images) or 'none'}")
+            raise ValueError(f"{p}: no depth topic (sensor_msgs/Image of 16UC1, mono16 or 32FC1, "
+                             f"or a compressedDepth CompressedImage); its image topics: "
+                             f"{', '.join(images) or 'none'}")
         for t in depth_topics:
             yield from _topic_frames(reader, conns, p, t, infos, units, intrinsics, depth_scale,
                                      undistort)
@@ -188,7 +239,7 @@ def read_rosbag(path: str | Path, *, topic: str | None = None, intrinsics: Any =
 
 def _first_encoding(reader: Any, conns: list, topic: str) -> str | None:
     for c, _, raw in reader.messages(connections=[c for c in conns if c.topic == topic]):
-        return str(reader.deserialize(raw, c.msgtype).encoding)
+        return _encoding(reader.deserialize(raw, c.msgtype))
     return None
 
 
@@ -233,7 +284,7 @@ def _topic_frames(reader: Any, conns: list, p: Path, topic: str, infos: list[str
     n = 0
     for c, stamp, raw in reader.messages(connections=[c for c in conns if c.topic == topic]):
         msg = reader.deserialize(raw, c.msgtype)
-        enc = str(msg.encoding)
+        enc = _encoding(msg)
         if enc not in DEPTH_ENCODINGS:
             raise ValueError(f"{p}: message {n} of {topic} is {enc}, not depth (16UC1, mono16, 32FC1)")
         stored = _image(msg, topic)
