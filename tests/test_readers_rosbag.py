@@ -290,3 +290,14 @@ def test_compressed_depth_topics(tmp_path):
         list(read_rosbag(bag))
     with pytest.raises(ValueError, match="not a depth topic"):
         list(read_rosbag(bag, topic="/camera/color/image_raw/compressed"))
+
+
+def test_without_rosbags_the_error_names_the_extra(tmp_path, monkeypatch):
+    import sys
+
+    bag = tmp_path / "d435.bag"
+    realsense_bag(bag, frames=1)
+    assert detect_format(bag) == "rosbag"  # the header alone, no rosbags needed
+    monkeypatch.setitem(sys.modules, "rosbags.highlevel", None)  # import fails as if absent
+    with pytest.raises(ImportError, match=r"ROS bags needs rosbags: pip install 'depthnormals\[ros\]'"):
+        list(read_rosbag(bag))

@@ -12,17 +12,25 @@ from .._png import read_png
 from ..camera import Intrinsics, as_intrinsics
 from ..io import read_intrinsics
 
-__all__ = ["depth_mask", "face_camera", "h5py_module", "read_depth_png", "resolve_intrinsics"]
+__all__ = ["depth_mask", "face_camera", "h5py_module", "optional_module", "read_depth_png",
+           "resolve_intrinsics"]
+
+
+def optional_module(name: str, needed_for: str, extra: str) -> Any:
+    """The module ``name`` of an optional dependency, imported on first use; without it an
+    ImportError saying what needs it and which extra installs it."""
+    import importlib
+
+    try:
+        return importlib.import_module(name)
+    except ImportError as exc:
+        raise ImportError(f"{needed_for} needs {name.split('.')[0]}: "
+                          f"pip install 'depthnormals[{extra}]'") from exc
 
 
 def h5py_module() -> Any:
     """h5py, imported on first use (NYU .mat and Hypersim files); a clear error without it."""
-    try:
-        import h5py
-    except ImportError as exc:
-        raise ImportError("reading NYU .mat and Hypersim files needs h5py: "
-                          "pip install 'depthnormals[io]'") from exc
-    return h5py
+    return optional_module("h5py", "reading NYU .mat and Hypersim files", "io")
 
 
 def resolve_intrinsics(intrinsics: Any, presets: Mapping[str, Intrinsics], *, what: str) -> Intrinsics:

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from ..camera import Intrinsics, check_distortion, undistort_depth
-from ._common import depth_mask, resolve_intrinsics
+from ._common import depth_mask, optional_module, resolve_intrinsics
 from ._frame import Frame
 
 __all__ = ["DEPTH_ENCODINGS", "is_rosbag", "read_rosbag"]
@@ -45,12 +45,7 @@ _COMPRESSED = "sensor_msgs/msg/CompressedImage"
 
 
 def _anyreader() -> Any:
-    try:
-        from rosbags.highlevel import AnyReader
-    except ImportError as exc:
-        raise ImportError("reading ROS bags needs the rosbags package: pip install "
-                          "'depthnormals[ros]' (or pip install rosbags)") from exc
-    return AnyReader
+    return optional_module("rosbags.highlevel", "reading ROS bags", "ros").AnyReader
 
 
 def is_rosbag(path: str | Path) -> bool:
