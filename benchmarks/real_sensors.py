@@ -20,7 +20,7 @@ a time-of-flight frame) is read undistorted (``depthnormals.undistort_depth``); 
 the same reference (its normals carried onto the undistorted grid by the same pixel map).
 
     python benchmarks/real_sensors.py [--methods 3f2n+,opencv-fals-7] [--json OUT]
-                                      [--repeats 5] [--root ../shared/data/real-sensors]
+                                      [--repeats 5] [--root ../shared/data/real-sensors ...]
                                       [--lens-ignored]
 """
 
@@ -209,7 +209,7 @@ def _table(acc: dict, labels: list[str], key: str, scale: float = 1.0, digits: i
     head = "| method | " + " | ".join(groups) + " | mean over folders |"
     lines = [head, "|---|" + "---:|" * (len(groups) + 1)]
     for label in labels:
-        vals = [acc[g][label][key] * scale for g in groups]
+        vals = [acc[g][label][key] * scale if label in acc[g] else float("nan") for g in groups]
         cells = [f"{v:.{digits}f}" if np.isfinite(v) else "-" for v in vals]
         mean = float(np.nanmean(vals)) if np.isfinite(vals).any() else float("nan")
         lines.append(f"| {label} | " + " | ".join(cells) + f" | {mean:.{digits}f} |")
@@ -237,7 +237,9 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--root", type=Path, default=ROOT, help="real sensor folder(s)")
+    parser.add_argument("--root", type=Path, nargs="+", default=[ROOT],
+                        help="real sensor folder(s) (each a folder of them, or one; their "
+                             "folders in one table, e.g. ../shared/data/real-sensors tests/data)")
     parser.add_argument("--methods", default=",".join(METHODS),
                         help=f"comma-separated, from: {', '.join(METHODS)}")
     parser.add_argument("--json", type=Path, default=None, metavar="OUT",
@@ -253,14 +255,18 @@ def main(argv: list[str] | None = None) -> int:
     unknown = [m for m in labels if m not in METHODS]
     if unknown:
         parser.error(f"unknown method(s) {', '.join(unknown)}; use {', '.join(METHODS)}")
-    if not args.root.is_dir():
-        parser.error(f"{args.root} does not exist")
-    print(f"machine: {machine()}; plane reference seed {args.seed}; {args.root}; "
+    for root in args.root:
+        if not root.is_dir():
+            parser.error(f"{root} does not exist")
+    print(f"machine: {machine()}; plane reference seed {args.seed}; "
+          f"{', '.join(str(r) for r in args.root)}; "
           f"git {_git_state()}")
-    acc = accuracy(args.root, labels, args.seed, args.lens_ignored)
+    acc: dict = {}
+    for root in args.root:
+        acc.update(accuracy(root, labels, args.seed, args.lens_ignored))
     if args.lens_ignored:  # the rows of the folders that have them
         labels = labels + [f"{m} (lens ignored)" for m in labels
-                           if all(f"{m} (lens ignored)" in acc[g] for g in acc)]
+                           if any(f"{m} (lens ignored)" in acc[g] for g in acc)]
     print("\nplanes per folder: " + ", ".join(f"{g} {acc[g]['planes']}" for g in acc))
     print("\n### interior mean error (deg), >= 5 px inside the planes\n")
     print(_table(acc, labels, "interior_mean"))
@@ -278,7 +284,7 @@ def main(argv: list[str] | None = None) -> int:
     print(_table(acc, labels, "coverage", 100.0, 1))
     timing: list[dict] = []
     if not args.no_speed:
-        timing = speed(args.root, args.repeats)
+        timing = [row for root in args.root for row in speed(root, args.repeats)]
         print(f"\n### 1 thread, 3f2n+ vs OpenCV FALS window 7, median of {args.repeats} "
               "(interleaved)\n")
         print("| frame | size | 3f2n+ ms (cpu / wall) | OpenCV FALS 7 ms (cpu / wall) "

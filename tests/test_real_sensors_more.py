@@ -19,7 +19,7 @@ from depthnormals.evaluate import plane_reference, score_planes, sensor_threshol
 DATA = Path(__file__).resolve().parent / "data"
 #: folder -> (interior, rim) mean error of the default measured with the full reference
 #: (docs/benchmarks.md section 25: ``python benchmarks/real_sensors.py --root <folder>``)
-MEASURED = {"azure_kinect_tof": (2.14, 10.58), "realsense_d435": (2.74, 8.93)}
+MEASURED = {"azure_kinect_tof": (2.14, 10.58), "realsense_d435": (2.69, 8.29)}
 PEERS = ("fals-11", "pcl-average-3d-gradient", "opencv-fals-7")
 
 
