@@ -578,7 +578,9 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
         The lens distortion of the depth images (OpenCV's order, ``k1, k2, p1, p2[, k3[, k4,
         k5, k6[, s1, s2, s3, s4]]]``): each frame is resampled onto the pinhole grid of its
         ``K`` before its normals (:func:`depthnormals.undistort_depth`); the outputs, a
-        ``.ply``'s points included, are on that grid. Recorded in the manifest.
+        ``.ply``'s points included, are on that grid. Dataset frames too: a reader that
+        undoes its own lens (a real-sensor folder's ``distortion``, a ROS bag's camera) has
+        done it already. Recorded in the manifest.
 
     Returns
     -------

@@ -55,8 +55,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--distortion", type=parse_distortion, default=None,
                         metavar="K1,K2,P1,P2[,K3[,K4,K5,K6]]",
                         help="the lens distortion of the depth images, OpenCV's order (4, 5, 8 or 12 "
-                             "numbers): each is resampled onto the pinhole grid of -K first (nearest "
-                             "pixel); default the camera file's distortion, else none")
+                             "numbers): each is resampled onto the pinhole grid of its camera first "
+                             "(nearest pixel), dataset frames too (a real-sensor folder or ROS bag "
+                             "that gives its own lens is undistorted by its reader: do not pass it "
+                             "again); default the camera file's distortion, else none")
     parser.add_argument("--vis", default="3f2n", choices=("3f2n", "open3d"),
                         help=".vis.png colouring: 3f2n = (1 - n) / 2 (default, the 3F2N papers'), "
                              "open3d = (n + 1) / 2 (Open3D's and most viewers')")
