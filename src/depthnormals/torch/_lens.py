@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Any
 
 import torch
@@ -59,7 +60,16 @@ def undistort_depth(depth: torch.Tensor, K: Any, distortion: Any) -> torch.Tenso
     if not any(dist):
         return depth.clone()
     h, w = depth.shape[-2:]
-    idx = torch.as_tensor(_source_pixels(h, w, cam, dist).astype("int64"), device=depth.device)
-    flat = depth.reshape(*depth.shape[:-2], h * w)
-    out = flat[..., idx.clamp(min=0).reshape(-1)].reshape(depth.shape)
-    return torch.where(idx >= 0, out, torch.full_like(out, float("nan")))
+    take, inside = _pixel_map(int(h), int(w), cam, dist, depth.device)
+    out = depth.reshape(*depth.shape[:-2], h * w)[..., take].reshape(depth.shape)
+    return torch.where(inside, out, torch.full_like(out, float("nan")))
+
+
+@lru_cache(maxsize=4)
+def _pixel_map(h: int, w: int, cam: Any, dist: tuple[float, ...],
+               device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
+    """The numpy function's pixel map on ``device`` (cached per camera, size and device, so a
+    stream of frames moves it once): the flat source index of every output pixel (0 where
+    none: masked) and where one exists, (H, W) bool."""
+    idx = torch.as_tensor(_source_pixels(h, w, cam, dist).astype("int64"), device=device)
+    return idx.clamp(min=0).reshape(-1), idx >= 0
