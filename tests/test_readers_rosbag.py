@@ -301,3 +301,18 @@ def test_without_rosbags_the_error_names_the_extra(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "rosbags.highlevel", None)  # import fails as if absent
     with pytest.raises(ImportError, match=r"ROS bags needs rosbags: pip install 'depthnormals\[ros\]'"):
         list(read_rosbag(bag))
+
+
+def test_a_damaged_bag_is_a_clear_error(tmp_path, capsys):
+    from depthnormals.cli import main
+
+    good = tmp_path / "d435.bag"
+    realsense_bag(good, frames=2)
+    data = good.read_bytes()
+    bad = tmp_path / "cut.bag"
+    bad.write_bytes(data[:len(data) // 2])  # the index and the second half gone
+    with pytest.raises(ValueError, match=r"cut\.bag: not a readable ROS bag"):
+        list(read_rosbag(bad))
+    assert main(["estimate", str(bad), "-o", str(tmp_path / "out"), "-q"]) != 0
+    err = capsys.readouterr().err
+    assert "not a readable ROS bag" in err and "Traceback" not in err

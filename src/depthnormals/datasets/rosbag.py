@@ -211,7 +211,18 @@ def read_rosbag(path: str | Path, *, topic: str | None = None, intrinsics: Any =
     if not p.exists():
         raise FileNotFoundError(f"ROS bag {p} does not exist")
     check_positive(depth_scale, "depth_scale", allow_none=True)
-    with _anyreader()([p]) as reader:
+    reader_cls = _anyreader()
+    try:
+        yield from _read(reader_cls, p, topic, intrinsics, depth_scale, undistort)
+    except Exception as exc:  # rosbags' own errors (a damaged or truncated bag) named as ours
+        if not type(exc).__module__.startswith("rosbags"):
+            raise
+        raise ValueError(f"{p}: not a readable ROS bag ({type(exc).__name__}: {exc})") from exc
+
+
+def _read(reader_cls: Any, p: Path, topic: str | None, intrinsics: Any,
+          depth_scale: float | None, undistort: bool) -> Iterator[Frame]:
+    with reader_cls([p]) as reader:
         conns = reader.connections
         images = sorted({c.topic for c in conns if c.msgtype in (_IMAGE, _COMPRESSED)})
         infos = sorted({c.topic for c in conns if c.msgtype == "sensor_msgs/msg/CameraInfo"})
