@@ -61,7 +61,7 @@ Columns:
     python benchmarks/uncertainty_calibration.py [--method 3f2n+] [--synth /tmp/u-synth ...]
         [--real ../shared/data/real-sensors] [--planes] [--by-crease] [--thin] [--min-fraction F]
         [--creases] [--json OUT]
-        [--figure PNG] [--bootstrap N] [--leave-one-out] [--frames N] [--speed]
+        [--figure PNG] [--bootstrap N] [--leave-one-out] [--frames N] [--surface R] [--speed]
 
 ``--bootstrap N``: each column's frames resampled N times with replacement; per decile bin the
 5-95 % range of observed / predicted and the share of resamples in which it passes, and the
@@ -76,6 +76,13 @@ that hangs on one frame's objects).
 in its failing bins (observed minus predicted, signed as each bin fails), with their share of it
 and their own observed / predicted there: where the leave-one-out finds no single frame, which
 scenes the miss is made of.
+
+``--surface R``: on the real frames' plane interiors, per quartile of the prediction, the
+mean predicted and observed error beside the angle between the reference's normal and the
+plane of the same plane's own points within R px (:func:`surface_floor`): the large-scale
+shape of the measured surface. Where that angle is as large as the observed error, the
+error the plane reference scores is the depth's own deformation, which no estimate of the
+depth, and so no map of the estimator's error, removes.
 
 ``--speed``: instead, the single-thread time of ``method`` with and without the map on every
 real frame and one frame per synthetic variant (median of 7, interleaved per frame), and the
@@ -533,9 +540,53 @@ def synth_columns(root: Path | list[Path], method: str, planes: bool = False, se
     return cols
 
 
+def surface_floor(depth: np.ndarray, K: np.ndarray, ref, radius: int) -> np.ndarray:
+    """``--surface``: per pixel of a plane's interior, the angle (deg) between the reference's
+    normal and the total-least-squares plane of that plane's own points within ``radius`` px
+    (a (2 radius + 1)^2 window, at least half of it the plane's): the large-scale shape of the
+    measured surface, whose random error over thousands of points is negligible. Where it
+    reads as much as the estimate errs, the error the plane reference scores is the depth's
+    own deformation (the sensor's systematic error), which no estimator of the depth can
+    remove. NaN elsewhere."""
+    import cv2
+
+    from depthnormals.camera import backproject
+
+    X = backproject(depth, K)
+    Xz = np.nan_to_num(X)
+    g = ref.normal_map().astype(np.float64)
+    k = (2 * radius + 1, 2 * radius + 1)
+
+    def box(a):
+        return cv2.boxFilter(a, -1, k, normalize=False, borderType=cv2.BORDER_CONSTANT)
+
+    out = np.full(depth.shape, np.nan)
+    for label in np.unique(ref.labels[ref.labels >= 0]):
+        v = ((ref.labels == label) & np.isfinite(X[..., 2])).astype(np.float64)
+        cnt = box(v)
+        m = ref.interior & (ref.labels == label) & (cnt > 0.5 * k[0] * k[1])
+        if not m.any():
+            continue
+        idx = np.nonzero(m)
+        c = cnt[idx]
+        mu = np.stack([box(Xz[..., i] * v)[idx] / c for i in range(3)], -1)
+        cov = np.empty((c.size, 3, 3))
+        for i in range(3):
+            for j in range(i, 3):
+                cov[:, i, j] = cov[:, j, i] = (box(Xz[..., i] * Xz[..., j] * v)[idx] / c
+                                               - mu[:, i] * mu[:, j])
+        n = np.linalg.eigh(cov)[1][:, :, 0]
+        cos = np.abs(np.einsum("ij,ij->i", n, g[idx]))
+        out[idx] = np.degrees(np.arccos(np.clip(cos, 0.0, 1.0)))
+    return out
+
+
 def real_columns(root: Path, method: str, seed: int, min_fraction: float | None = None,
-                 creases: bool = False, profiles: dict[str, BandProfile] | None = None
-                 ) -> dict[str, Column]:
+                 creases: bool = False, profiles: dict[str, BandProfile] | None = None,
+                 surface: int = 0, floors: dict[str, list] | None = None) -> dict[str, Column]:
+    """The real frames' columns (pooled and per folder), scored on their plane references;
+    with ``surface`` (a radius) and ``floors`` (a dict), also each column's interior pixels'
+    prediction, observation and :func:`surface_floor`, into ``floors[column]``."""
     from depthnormals.datasets import open as open_dataset
     from depthnormals.evaluate import crease_band, plane_reference, sensor_threshold
 
@@ -554,6 +605,11 @@ def real_columns(root: Path, method: str, seed: int, min_fraction: float | None 
         name = f"{f.group}/{f.name}"
         cols.setdefault(f"real/{group}", Column()).add(u, err, mask, name=name)
         cols["real"].add(u, err, mask, name=name)
+        if surface and floors is not None:
+            fl = surface_floor(f.depth, f.K, ref, surface)
+            ok = np.isfinite(fl) & np.isfinite(u) & np.isfinite(err)
+            for key in (f"real/{group}", "real"):
+                floors.setdefault(key, []).append((u[ok], err[ok], fl[ok]))
         if creases:
             band = crease_band(f.depth, f.K, ref)
             g[band.mask] = band.normals[band.mask]
@@ -718,6 +774,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--leave-one-out", action="store_true",
                     help="also bin each column without each of its frames in turn: which frame "
                          "a failing decile hangs on")
+    ap.add_argument("--surface", type=int, default=0, metavar="R",
+                    help="also print, per quartile of the prediction on the real frames' "
+                         "interiors, how far the plane of each plane's own points within R px "
+                         "lies from its reference (surface_floor: the depth's own deformation)")
     ap.add_argument("--frames", type=int, default=0, metavar="N",
                     help="for each column with a failing bin, the N frames that carry most of "
                          "its excess there")
@@ -744,9 +804,10 @@ def main(argv: list[str] | None = None) -> int:
         cols.update(synth_columns(a.synth, a.method, a.planes, a.seed, profiles, a.by_crease,
                                   a.thin, agreement))
         cols = dict(sorted(cols.items(), key=lambda kv: _order(kv[0])))
+    floors: dict[str, list] = {}
     if a.real:
         cols.update(real_columns(Path(a.real), a.method, a.seed, a.min_fraction, a.creases,
-                                 profiles))
+                                 profiles, a.surface, floors))
     results = {k: c.summary(a.bootstrap, a.seed, a.leave_one_out, a.frames)
                for k, c in cols.items()}
     for k, s in results.items():
@@ -770,6 +831,18 @@ def main(argv: list[str] | None = None) -> int:
                 f"{part}: {r['pixels']} {100 * r['reference_off']:.2f}% "
                 f"{100 * r['estimate_off_exact']:.2f}% / {100 * r['estimate_off_reference']:.2f}% "
                 f"same {100 * r['off_the_same_way']:.2f}%" for part, r in parts.items()))
+    if floors:
+        print(f"\nthe depth's own deformation (--surface {a.surface}): per quartile of the "
+              "prediction on the plane interiors, mean predicted / observed / the angle of the "
+              f"{2 * a.surface + 1}-px own-plane fit to the reference (deg), pixels")
+        for k, parts in floors.items():
+            u, o, fl = (np.concatenate(x) for x in zip(*parts, strict=True))
+            q = np.quantile(u, [0.0, 0.25, 0.5, 0.75, 1.0])
+            cells = []
+            for i in range(4):
+                b = (u >= q[i]) & (u <= q[i + 1])
+                cells.append(f"{u[b].mean():.2f} / {o[b].mean():.2f} / {fl[b].mean():.2f}")
+            print(f"  {k:32s} " + "   ".join(cells) + f"   ({u.size} px)")
     print("\nsummary: column, Spearman, bins passed, target (every bin; Spearman)")
     for k, s in results.items():
         t = target(k)

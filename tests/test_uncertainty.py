@@ -1646,3 +1646,34 @@ def test_measured_support_map_follows_the_switch(monkeypatch):
     assert ex.any()
     differ = ~np.isclose(u1, u2, equal_nan=True)
     assert differ.any() and not (differ & ~ex).any()
+
+
+def test_calibration_bench_surface_floor_reads_the_depths_own_bend(load_benchmark):
+    """``--surface`` (``surface_floor``): a wall facing the camera 2 m away, one reference
+    plane whose normal is (0, 0, -1). Flat, the plane of each pixel's own points within R px is
+    the reference's (0 deg); bowed by ``c x^2`` (x metres from the middle) it tilts with the
+    local slope, atan(2 c x), while the reference keeps the mean plane; pixels whose window is
+    mostly another plane's, and the rims, get NaN."""
+    pytest.importorskip("cv2")
+    import types
+
+    bench = load_benchmark("uncertainty_calibration")
+    h, w, f = 120, 160, 80.0
+    K = np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1.0]])
+    x = (np.arange(w) - (w - 1) / 2) / f * 2.0  # metres across at z = 2
+    labels = np.zeros((h, w), np.int64)
+    labels[:, :20] = 1  # another plane at the left
+    interior = np.zeros((h, w), bool)
+    interior[5:-5, 25:-5] = True
+    ref = types.SimpleNamespace(labels=labels, interior=interior,
+                                normal_map=lambda: np.broadcast_to(np.array([0.0, 0.0, -1.0]),
+                                                                   (h, w, 3)))
+    flat = bench.surface_floor(np.full((h, w), 2.0), K, ref, 10)
+    assert np.isfinite(flat[interior]).mean() > 0.9 and np.nanmax(flat) < 1e-4
+    assert np.isnan(flat[~interior]).all()
+    c = 0.01
+    bowed = bench.surface_floor(2.0 + c * x[None, :] ** 2 * np.ones((h, 1)), K, ref, 10)
+    v = 60
+    for u in (60, 80, 120, 150):  # the fit's tilt follows the slope 2 c x (the window's mean)
+        want = np.degrees(np.arctan(2 * c * abs(x[u])))
+        assert bowed[v, u] == pytest.approx(want, abs=0.05 + 0.1 * want), (u, bowed[v, u], want)
