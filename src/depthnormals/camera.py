@@ -12,7 +12,7 @@ import numpy as np
 from ._validate import check_depth, unmasked
 
 __all__ = ["DISTORTION_LENGTHS", "Intrinsics", "IntrinsicsLike", "as_intrinsics", "backproject",
-           "check_distortion", "undistort_depth"]
+           "check_distortion", "lens_distortion", "undistort_depth"]
 
 
 @dataclass(frozen=True)
@@ -192,6 +192,16 @@ def check_distortion(distortion: Any, name: str = "distortion") -> tuple[float, 
     if not np.all(np.isfinite(d)):
         raise ValueError(f"{name} must be finite; got {d.tolist()}")
     return tuple(float(x) for x in d)
+
+
+def lens_distortion(distortion: Any, name: str = "distortion") -> tuple[float, ...]:
+    """A lens to undo: ``distortion`` checked (:func:`check_distortion`), or () where there is
+    nothing to undo (None, an empty sequence, every coefficient 0). The one reading of the
+    optional ``distortion`` of camera files, real-sensor folders and the command line."""
+    if distortion is None or (isinstance(distortion, (list, tuple)) and not distortion):
+        return ()
+    d = check_distortion(distortion, name)
+    return d if any(d) else ()
 
 
 @lru_cache(maxsize=4)

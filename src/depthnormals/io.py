@@ -24,7 +24,7 @@ import numpy as np
 
 from ._png import decode_png, encode_png, read_png
 from ._validate import check_depth, check_normals, check_positive
-from .camera import Intrinsics, as_intrinsics, check_distortion
+from .camera import Intrinsics, as_intrinsics, lens_distortion
 
 __all__ = [
     "OUTPUT_SUFFIXES",
@@ -557,10 +557,9 @@ def _mapping_camera(data: dict, path: Path) -> CameraFile:
     if encoding is not None and not isinstance(encoding, str):
         raise ValueError(f'"encoding" must be a name such as "linear"; got {encoding!r}')
     raw_format = extras.get("raw_format")
-    dist = extras.get("distortion")
-    dist = () if dist is None else check_distortion(dist, '"distortion"')
     return CameraFile(K, scale, codes, max_depth, path, encoding,
-                      None if raw_format is None else str(raw_format), dist if any(dist) else (),
+                      None if raw_format is None else str(raw_format),
+                      lens_distortion(extras.get("distortion"), '"distortion"'),
                       _ros_distortion(data))
 
 
@@ -573,10 +572,9 @@ def _ros_distortion(data: dict) -> tuple[float, ...]:
     if isinstance(value, dict):
         value = value.get("data", ())
     try:
-        d = check_distortion(value)
+        return lens_distortion(value)
     except (TypeError, ValueError):
         return ()
-    return d if any(d) else ()
 
 
 _EXTRAS = ("depth_scale", "invalid", "invalid_value", "max_depth", "encoding", "raw_format",

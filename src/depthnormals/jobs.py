@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 
 from ._fingerprint import array_digest, code_fingerprint
-from .camera import Intrinsics, as_intrinsics, check_distortion, undistort_depth
+from .camera import Intrinsics, as_intrinsics, lens_distortion, undistort_depth
 from .io import DEPTH_SUFFIXES, VIS_CONVENTIONS, not_depth_reason
 
 __all__ = ["FORMATS", "INPUTS_LOG", "MANIFEST", "EstimateJob", "EstimateSettings", "RunSummary",
@@ -521,15 +521,6 @@ def _remove_run_traces(out: Path, created: bool) -> None:
         shutil.rmtree(out, ignore_errors=True)
 
 
-def _distortion(distortion: Sequence[float] | None) -> tuple[float, ...]:
-    """``distortion`` checked (:func:`depthnormals.camera.check_distortion`); () for None, an
-    empty sequence or all zeros (nothing to undo)."""
-    if distortion is None or (isinstance(distortion, (tuple, list)) and not distortion):
-        return ()
-    d = check_distortion(distortion)
-    return d if any(d) else ()
-
-
 def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: str, K: Any = None,
                  options: Mapping[str, Any] | None = None, depth_scale: float | None = None,
                  fmt: str = "npy", resume: bool = True, progress: bool = False,
@@ -612,7 +603,7 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
                              f"{', '.join(UNCERTAINTY_METHODS)}; got method {method!r}")
     settings = EstimateSettings(method, dict(options or {}), depth_scale, tuple(float(c) for c in invalid),
                                 check_positive(max_depth, "max_depth", allow_none=True), vis,
-                                bool(uncertainty), _distortion(distortion))
+                                bool(uncertainty), lens_distortion(distortion))
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise ValueError(f"output {out} exists and is not a folder")

@@ -171,6 +171,7 @@ def read_settings(args: argparse.Namespace, camera: Any) -> ReadSettings:
     to the camera file's ``depth_scale`` / ``invalid`` / ``max_depth`` / ``distortion``
     (:func:`depthnormals.io.read_camera_file`)."""
     from .._validate import check_positive
+    from ..camera import lens_distortion
 
     encoding = _encoding(camera)
     if encoding != "linear":
@@ -189,7 +190,7 @@ def read_settings(args: argparse.Namespace, camera: Any) -> ReadSettings:
               f"{list(ros)} (ROS camera_info), which is not applied: ROS depth topics are taken as "
               "rectified (image_rect); for an image_raw stream pass --distortion "
               f"{','.join(format(c, '.10g') for c in ros)}", file=sys.stderr)
-    return ReadSettings(scale, tuple(invalid), max_depth, tuple(dist) if any(dist) else ())
+    return ReadSettings(scale, tuple(invalid), max_depth, lens_distortion(dist))
 
 
 def _encoding(camera: Any) -> str:

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from .._png import read_png
-from ..camera import Intrinsics, check_distortion, undistort_depth
+from ..camera import Intrinsics, lens_distortion, undistort_depth
 from ..io import read_npy, read_pgm
 from ._common import depth_mask, resolve_intrinsics
 from ._frame import Frame
@@ -197,14 +197,10 @@ def _to_metres(raw: np.ndarray, encoding: str, scale: float, invalid: list[float
 
 def _distortion_of(info: dict, folder: Path) -> tuple[float, ...]:
     """The ``distortion`` of an ``intrinsics.json`` (OpenCV's order), () when absent or all 0."""
-    given = info.get("distortion")
-    if given is None:
-        return ()
     try:
-        dist = check_distortion(given)
+        return lens_distortion(info.get("distortion"))
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{folder / _JSON}: {exc}") from exc
-    return dist if any(dist) else ()
 
 
 def _folder_frames(folder: Path, group: str, intrinsics: Any,
