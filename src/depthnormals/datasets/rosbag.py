@@ -227,7 +227,9 @@ def _read(reader_cls: Any, p: Path, topic: str | None, intrinsics: Any,
         images = sorted({c.topic for c in conns if c.msgtype in (_IMAGE, _COMPRESSED)})
         infos = sorted({c.topic for c in conns if c.msgtype == "sensor_msgs/msg/CameraInfo"})
         units = [c for c in conns if c.topic.endswith("/option/Depth Units/value")]
-        depth_topics = [t for t in images if _first_encoding(reader, conns, t) in DEPTH_ENCODINGS]
+        firsts = {t: _one(reader, conns, t) for t in images}
+        depth_topics = [t for t in images
+                        if firsts[t] is not None and _encoding(firsts[t]) in DEPTH_ENCODINGS]
         if topic is not None:
             if topic not in depth_topics:
                 raise ValueError(f"{p}: {topic!r} is not a depth topic of this bag (16UC1, mono16 "
@@ -241,12 +243,6 @@ def _read(reader_cls: Any, p: Path, topic: str | None, intrinsics: Any,
         for t in depth_topics:
             yield from _topic_frames(reader, conns, p, t, infos, units, intrinsics, depth_scale,
                                      undistort)
-
-
-def _first_encoding(reader: Any, conns: list, topic: str) -> str | None:
-    for c, _, raw in reader.messages(connections=[c for c in conns if c.topic == topic]):
-        return _encoding(reader.deserialize(raw, c.msgtype))
-    return None
 
 
 def _one(reader: Any, conns: list, topic: str) -> Any:
