@@ -149,8 +149,7 @@ def _depth_files(folder: Path) -> list[Path]:
 
 
 def _dataset_frames(folder: Path) -> Iterator[Any] | None:
-    """The frames of a dataset folder (or file: a ROS bag, NYU's ``.mat``), or None when it
-    holds no known dataset layout."""
+    """The frames of a dataset folder, or None when it holds no known dataset layout."""
     from . import datasets
 
     frames = iter(datasets.open(folder))
@@ -168,6 +167,20 @@ def _dataset_frames(folder: Path) -> Iterator[Any] | None:
         yield from frames
 
     return chain()
+
+
+def is_dataset_file(path: Path) -> bool:
+    """A file without a depth image's suffix that a dataset reader takes (a ROS bag, NYU's
+    labeled ``.mat``): an input of many frames."""
+    from . import datasets
+
+    if not path.is_file() or path.suffix.lower() in DEPTH_SUFFIXES:
+        return False
+    try:
+        datasets.detect_format(path)
+    except ValueError:
+        return False
+    return True
 
 
 def _stem(rel: Path) -> str:
@@ -261,12 +274,12 @@ def plan_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, K: Any =
                                  "(colour images or other arrays)")
             yield from files(kept, _glob_root(text))
         elif path.is_file():
-            # a file that is no depth image may be a dataset (a ROS bag, NYU's labeled .mat)
-            frames = None if path.suffix.lower() in DEPTH_SUFFIXES else _dataset_frames(path)
-            if frames is None:
-                yield from files([path], path.parent)
+            if is_dataset_file(path):
+                from . import datasets
+
+                yield from dataset(datasets.open(path), path)
             else:
-                yield from dataset(frames, path)
+                yield from files([path], path.parent)
         elif path.is_dir():
             frames = _dataset_frames(path)
             if frames is None:

@@ -137,23 +137,11 @@ def parse_options(items: list[str]) -> dict:
 def _many(args: argparse.Namespace) -> bool:
     """The many-frames form: several inputs, a folder or glob, a dataset file (a ROS bag, NYU's
     labeled ``.mat``), a scheduler, or -o an existing folder."""
+    from ..jobs import is_dataset_file
+
     return (len(args.depth) > 1 or args.depth[0].is_dir() or args.output.is_dir()
             or args.scheduler is not None or any(c in str(args.depth[0]) for c in "*?[")
-            or _dataset_file(args.depth[0]))
-
-
-def _dataset_file(path: Path) -> bool:
-    """A file with no depth image's suffix that a dataset reader takes."""
-    from .. import datasets
-    from ..io import DEPTH_SUFFIXES
-
-    if not path.is_file() or path.suffix.lower() in DEPTH_SUFFIXES:
-        return False
-    try:
-        datasets.detect_format(path)
-    except ValueError:
-        return False
-    return True
+            or is_dataset_file(args.depth[0]))
 
 
 @dataclass(frozen=True)
