@@ -228,6 +228,19 @@ def test_uncertainty_tensor():
             assert np.array_equal(u[i, 0].numpy(), ref, equal_nan=True)
     nz, uz = dt.estimate_normals(z, K_SMALL, return_uncertainty=True, invalid="zero")
     assert torch.equal(uz == 0, (nz == 0).all(1, keepdim=True)) and not torch.isnan(uz).any()
+    # which normals come with the map: the torch pass's where it is asked for or a gradient is
+    # (to the bit), else the numba library's, computed with the map
+    own = dt.estimate_normals(z, K_SMALL, backend="torch")
+    lib = np.stack([dn.estimate_normals(d, K_SMALL) for d in depths])
+    assert not torch.equal(torch.nan_to_num(own), torch.nan_to_num(torch.from_numpy(lib).permute(0, 3, 1, 2)))
+    n_torch = dt.estimate_normals(z, K_SMALL, return_uncertainty=True, backend="torch")[0]
+    assert torch.equal(torch.nan_to_num(n_torch), torch.nan_to_num(own))
+    n_auto = dt.estimate_normals(z, K_SMALL, return_uncertainty=True)[0]
+    assert np.array_equal(n_auto.permute(0, 2, 3, 1).numpy(), lib, equal_nan=True)
+    zg = z.clone().requires_grad_(True)
+    n_grad, u_grad = dt.estimate_normals(zg, K_SMALL, return_uncertainty=True)
+    assert n_grad.grad_fn is not None and u_grad.grad_fn is None
+    assert torch.equal(torch.nan_to_num(n_grad.detach()), torch.nan_to_num(own))
     with pytest.raises(ValueError, match="3f2n\\+"):
         dt.estimate_normals(z, K_SMALL, method="d2nt+", return_uncertainty=True)
 
