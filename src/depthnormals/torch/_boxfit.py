@@ -30,7 +30,6 @@ from ..ddm.auto import _slopes as _auto_slopes
 from ..ddm.boxfit import LOCAL_CAP, MIN_POINTS, SHIFTS
 from ..ddm.support import DEVIATION, FALLBACK_RADIUS
 from ..kernels.eig3 import sym3_adjugate_apply
-from ._common import shift as _at
 
 __all__ = ["Fits", "box_fits", "choose_least", "choose_local", "choose_plain", "keep_estimator",
            "upsample_half"]
@@ -158,20 +157,34 @@ def _ray_facing(nx, ny, nz, cam, ok):
 
 
 def _gather_plane(f: Fits, k: torch.Tensor, shift: int):
-    """The plane (a, b, c) and centre offset (dv, du) of window ``k`` (index into SHIFTS) per pixel."""
-    a = torch.zeros_like(f.a)
-    b = torch.zeros_like(f.b)
-    c = torch.zeros_like(f.c)
-    dvs = torch.zeros_like(k)
-    dus = torch.zeros_like(k)
-    for i, (dv, du) in enumerate(_SHIFTS):
-        sel = k == i
-        a = torch.where(sel, _at(f.a, shift * dv, shift * du, 0.0), a)
-        b = torch.where(sel, _at(f.b, shift * dv, shift * du, 0.0), b)
-        c = torch.where(sel, _at(f.c, shift * dv, shift * du, 1.0), c)
-        dvs = torch.where(sel, torch.full_like(k, shift * dv), dvs)
-        dus = torch.where(sel, torch.full_like(k, shift * du), dus)
+    """The plane (a, b, c) and centre offset (dv, du) of window ``k`` (index into SHIFTS) per
+    pixel; every chooser picks only windows inside the image (those outside score inf)."""
+    d = torch.tensor(_SHIFTS, dtype=torch.long, device=k.device) * shift
+    dvs, dus = d[k, 0], d[k, 1]
+    a, b, c = _take(k.shape, dvs, dus, f.a, f.b, f.c)
     return a, b, c, dvs, dus
+
+
+def _take(shape, dvs: torch.Tensor, dus: torch.Tensor, *qs: torch.Tensor) -> list[torch.Tensor]:
+    """Each of ``qs`` (B, H, W) read at every pixel's offset (``dvs``, ``dus``) (clamped into
+    the image): a gather, so a gradient reaches the value read (as a shifted copy's would)."""
+    bsz, h, w = shape
+    v = (torch.arange(h, device=dvs.device).reshape(1, h, 1) + dvs).clamp(0, h - 1)
+    u = (torch.arange(w, device=dus.device).reshape(1, 1, w) + dus).clamp(0, w - 1)
+    src = (v * w + u).reshape(bsz, -1)
+    return [torch.gather(q.reshape(bsz, -1), 1, src).reshape(shape) for q in qs]
+
+
+def _least_shifted(s0: torch.Tensor, shift: int, shifts) -> tuple[torch.Tensor, torch.Tensor]:
+    """The least of ``s0`` read at the offsets ``shifts`` (times ``shift``; inf outside the
+    image, NaN read as inf) and the index of the first that holds it: the running ``sk <
+    best`` of the numba kernels over the windows in order, in a few kernel launches."""
+    p = shift * max(max(abs(dv), abs(du)) for dv, du in shifts)
+    h, w = s0.shape[-2:]
+    sp = F.pad(s0, (p, p, p, p), value=float("inf"))
+    sk = torch.stack([sp[..., p + shift * dv:p + shift * dv + h, p + shift * du:p + shift * du + w]
+                      for dv, du in shifts])
+    return torch.where(sk == sk, sk, float("inf")).min(0)
 
 
 def _plane_normal(a, b, c, dvs, dus, cam):
@@ -217,22 +230,29 @@ def choose_local(zs, valid, fits: Fits, big: Fits | None, shift: int, gate: torc
         u = torch.arange(w, dtype=zs.dtype, device=zs.device).reshape(1, 1, w)
         v = torch.arange(h, dtype=zs.dtype, device=zs.device).reshape(1, h, 1)
         kc_all = pc - pa * u - pb * v  # the plane in image coordinates, at its own window
-        pix = []  # the 3x3: (z fsd, u, v, ok)
-        for dv in (-1, 0, 1):
-            for du in (-1, 0, 1):
-                pix.append((_at(zd, dv, du, 1.0) * fsd, u + du, v + dv, _at(valid, dv, du, False)))
+        # the 3x3 stacked (9, B, H, W): z fsd, u, v, ok (one kernel a step for all nine: eager
+        # on a GPU this loop was launch-bound); the nine terms are then added in the numba
+        # kernel's order
+        nine = [(dv, du) for dv in (-1, 0, 1) for du in (-1, 0, 1)]
+        zp, vp = F.pad(zd, (1, 1, 1, 1), value=1.0), F.pad(valid, (1, 1, 1, 1), value=False)
+        zi = torch.stack([zp[..., 1 + dv:1 + dv + h, 1 + du:1 + du + w] for dv, du in nine]) * fsd
+        oki = torch.stack([vp[..., 1 + dv:1 + dv + h, 1 + du:1 + du + w] for dv, du in nine])
+        ui = torch.stack([u + du for _, du in nine])
+        vi = torch.stack([v + dv for dv, _ in nine])
+        p = shift
+        padded = [F.pad(q, (p, p, p, p), value=f) for q, f in
+                  ((pa, 0.0), (pb, 0.0), (kc_all, 0.0), (fits.score, float("inf")))]
         best = torch.full_like(zd, float("inf"))
         kbest = torch.zeros(zd.shape, dtype=torch.long, device=zd.device)
         for i, (dv, du) in enumerate(_SHIFTS):
-            sv, su = shift * dv, shift * du
-            ka = _at(pa, sv, su, 0.0)
-            kb = _at(pb, sv, su, 0.0)
-            kc = _at(kc_all, sv, su, 0.0)
-            exists = _at(fits.score, sv, su, float("inf")) < float("inf")
+            sv, su = p + shift * dv, p + shift * du
+            ka, kb, kc, sc = (q[..., sv:sv + h, su:su + w] for q in padded)
+            exists = sc < float("inf")
+            res = fsd - zi * (ka * ui + kb * vi + kc)
+            terms = torch.where(oki, torch.clamp(res * res, max=LOCAL_CAP), 0.0)
             sk = torch.zeros_like(zd)
-            for zi, ui, vi, oki in pix:
-                res = fsd - zi * (ka * ui + kb * vi + kc)
-                sk = sk + torch.where(oki, torch.clamp(res * res, max=LOCAL_CAP), 0.0)
+            for t in terms:
+                sk = sk + t
             sk = torch.where(exists, sk, float("inf"))
             take = sk < best
             best = torch.where(take, sk, best)
@@ -252,11 +272,10 @@ def choose_plain(valid, fits: Fits, big: Fits | None, shift: int, gate: float, b
         best = s0 * self_weight
         kbest = torch.zeros(s0.shape, dtype=torch.long, device=s0.device)
         search = ~(s0 <= gate)
-        for i, (dv, du) in enumerate(_SHIFTS[1:], start=1):
-            sk = _at(s0, shift * dv, shift * du, float("inf"))
-            take = search & (sk < best)
-            best = torch.where(take, sk, best)
-            kbest = torch.where(take, i, kbest)
+        least, k = _least_shifted(s0, shift, _SHIFTS[1:])
+        take = search & (least < best)
+        best = torch.where(take, least, best)
+        kbest = torch.where(take, k + 1, kbest)
         found = best < float("inf")
         take_big = valid & (big.score <= big_gate) if big is not None else torch.zeros_like(valid)
     return _chosen(fits, big, kbest, found, take_big, valid, shift, cam)
@@ -286,16 +305,11 @@ def _fallback(n, dev, zreal, vreal, cam):
     score = small.score
     zero = torch.zeros_like(score, dtype=torch.long)
     fx_, fy_, fz_ = _plane_normal(small.a, small.b, small.c, zero, zero, cam)
-    inf = float("inf")
-    best = torch.full_like(score, inf)
-    bx, by, bz = (torch.zeros_like(score) for _ in range(3))
-    for dv, du in _SHIFTS:  # in order: the first of equal scores wins
-        sk = _at(score, rs * dv, rs * du, inf)
-        take = sk < best
-        best = torch.where(take, sk, best)
-        bx, by, bz = (torch.where(take, _at(q, rs * dv, rs * du, 0.0), p)
-                      for p, q in ((bx, fx_), (by, fy_), (bz, fz_)))
-    use = flag & (best < inf)
+    best, k = _least_shifted(score, rs, _SHIFTS)  # in order: the first of equal scores wins
+    found = best < float("inf")
+    d = torch.tensor(_SHIFTS, dtype=torch.long, device=k.device) * rs
+    bx, by, bz = (torch.where(found, q, 0.0) for q in _take(k.shape, d[k, 0], d[k, 1], fx_, fy_, fz_))
+    use = flag & found
     fb = _ray_facing(bx, by, bz, cam, use)
     return (*tuple(torch.where(use, q, p) for p, q in zip(n[:3], fb[:3], strict=True)), n[3])
 
@@ -330,12 +344,10 @@ def choose_least(zs, valid, fits: Fits, big: Fits | None, shift: int, gate: torc
         g0 = gate.float() * fac
         s0 = fits.score.float()
         best = torch.where(s0 <= g0, torch.full_like(s0, -1.0), s0)
-        kbest = torch.zeros(s0.shape, dtype=torch.long, device=s0.device)
-        for i, (dv, du) in enumerate(_SHIFTS[1:], start=1):
-            sk = _at(s0, shift * dv, shift * du, float("inf"))
-            take = sk < best
-            best = torch.where(take, sk, best)
-            kbest = torch.where(take, i, kbest)
+        least, k = _least_shifted(s0, shift, _SHIFTS[1:])
+        take = least < best
+        best = torch.where(take, least, best)
+        kbest = torch.where(take, k + 1, 0)
         found = best < float("inf")
         if big is not None:
             bs = big.score.float().repeat_interleave(big_scale, -2).repeat_interleave(big_scale, -1)

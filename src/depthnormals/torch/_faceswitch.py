@@ -84,24 +84,50 @@ def switch_faces(z: torch.Tensor, n: tuple, cam, span: int) -> tuple:
         inf = torch.full_like(z, math.inf)
         other, same = inf, distance(nf, s)
         best = torch.full(z.shape, -1, dtype=torch.long, device=dev)
-        for k, (dv, du) in enumerate(_DIRECTIONS):
-            qn = [_at(q, span * dv, span * du, math.nan) for q in nf]
+        # the neighbours of every direction of a chunk at once (few kernel launches: eager on
+        # a GPU this loop was launch-bound), the chunk sized to bound the memory; the first
+        # least distance wins, as the numba kernel's loop over the directions takes it
+        nfp = _padded(torch.stack(nf), span, math.nan)
+        sp = _padded(s[:4], span, 0.0)
+        per = max(1, min(len(_DIRECTIONS), _CHUNK // max(1, z.numel())))
+        for k0 in range(0, len(_DIRECTIONS), per):
+            ks = _DIRECTIONS[k0:k0 + per]
+            qn = torch.stack([_view(nfp, span, span * dv, span * du, h, w) for dv, du in ks], 1)
+            qs = torch.stack([_view(sp, span, span * dv, span * du, h, w) for dv, du in ks], 1)
             dot = nf[0] * qn[0] + nf[1] * qn[1] + nf[2] * qn[2]
             dot = torch.where(dot == dot, dot, torch.full_like(dot, 2.0))
-            qs = [_at(q, span * dv, span * du, 0.0) for q in s[:4]]
             m = distance(qn, qs)
             is_other = dot < cm
-            take = is_other & (m < other)
-            other = torch.where(take, m, other)
-            best = torch.where(take, k, best)
-            own_face = ~is_other & (dot <= 1.5)
-            same = torch.where(own_face & (m < same), m, same)
+            mo, ko = torch.where(is_other & (m < math.inf), m, math.inf).min(0)
+            take = mo < other
+            other = torch.where(take, mo, other)
+            best = torch.where(take, ko + k0, best)
+            own = torch.where(~is_other & (dot <= 1.5) & (m == m), m, math.inf).amin(0)
+            same = torch.where(own < same, own, same)
         switch = smooth & (best >= 0) & (other < MARGIN * same)
     if not bool(switch.any()):
         return n, switch
-    out = [nx, ny, nz]
-    for k, (dv, du) in enumerate(_DIRECTIONS):
-        sel = switch & (best == k)
-        out = [torch.where(sel, _at(q, span * dv, span * du, 0.0), o)
-               for q, o in zip((nx, ny, nz), out, strict=True)]
+    # a switched cell takes the normal of its neighbour ``best`` (inside the image: one outside
+    # has no normal, so it is no other face)
+    dirs = torch.tensor(_DIRECTIONS, dtype=torch.long, device=dev) * span
+    k = best.clamp(min=0)
+    vv = torch.arange(h, device=dev).reshape(1, h, 1) + dirs[k, 0]
+    uu = torch.arange(w, device=dev).reshape(1, 1, w) + dirs[k, 1]
+    src = torch.where(switch, vv.clamp(0, h - 1) * w + uu.clamp(0, w - 1),
+                      torch.arange(h * w, device=dev).reshape(1, h, w)).reshape(z.shape[0], -1)
+    out = [torch.gather(q.reshape(z.shape[0], -1), 1, src).reshape(z.shape) for q in (nx, ny, nz)]
     return (*out, ok), switch
+
+
+#: Elements (directions x frames x pixels) of one chunk of the face switch's directions.
+_CHUNK = 1 << 23
+
+
+def _padded(x: torch.Tensor, p: int, fill: float) -> torch.Tensor:
+    """``x`` (..., H, W) padded by ``p`` on every side with ``fill``."""
+    return torch.nn.functional.pad(x, (p, p, p, p), value=fill)
+
+
+def _view(xp: torch.Tensor, p: int, dv: int, du: int, h: int, w: int) -> torch.Tensor:
+    """The padded ``xp`` read at offset (dv, du): :func:`._common.shift` of the unpadded."""
+    return xp[..., p + dv:p + dv + h, p + du:p + du + w]

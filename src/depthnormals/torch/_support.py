@@ -1,7 +1,8 @@
 """The measured support of the default 3F2N+ in torch: the adjacent-window pairs of
 :func:`depthnormals.ddm.support.support_profile`, fitted on the device for every frame and
-radius at once; the statistics (medians, the radius, the depth exponent) are the numba
-library's own on the few hundred pair rows per radius
+radius at once (the radii of a group of :data:`GROUPS` in one call, the sampled windows'
+places laid out once per image size and device); the statistics (medians, the radius, the
+depth exponent) are the numba library's own on the few hundred pair rows per radius
 (:func:`depthnormals.ddm.support.profiles_from_pair_tables`: the medians of every frame
 together, then the choices frame by frame, as :func:`~depthnormals.ddm.support.profile_from_pairs`
 takes them), so both take the same decisions. No gradients (the profile only chooses).
@@ -9,12 +10,14 @@ takes them), so both take the same decisions. No gradients (the profile only cho
 
 from __future__ import annotations
 
+import functools
+
+import numpy as np
 import torch
 
 from ..ddm.noise import TILE
 from ..ddm.support import (
     MIN_VALID,
-    RADII,
     SupportProfile,
     profiles_from_pair_tables,
     sample_every,
@@ -25,28 +28,98 @@ from ._boxfit import _solve
 __all__ = ["support_profiles"]
 
 
-def _fit(zf: torch.Tensor, centres: torch.Tensor, r: int, every: int, w: int, cam):
-    """Least-squares planes of ``1 / z`` over the windows of radius ``r`` (read on every
-    ``every``-th row and column) centred at ``centres`` (N, 2) (v, u), all inside the image,
-    of every frame of ``zf`` (B, H * W) float64, NaN at invalid pixels: (residual variance in
-    footprints^2, unit normal (B, N, 3)), NaN where no fit (``ddm.support._fit``)."""
+#: Radii whose sampled windows are fitted in one call, each window's offsets padded to the
+#: group's largest: few kernel launches (eager on a GPU this step was launch-bound, eight
+#: calls of ~190 operations), and two groups keep the padded reads to 1.5x the windows' own.
+GROUPS = ((1, 2, 3, 4, 6, 8), (11, 16))
+
+
+@functools.lru_cache(maxsize=16)
+def _layout(h: int, w: int, radii: tuple[int, ...]) -> dict[str, np.ndarray]:
+    """Where the sampled windows of ``radii`` on an ``h x w`` image read (the grid of
+    ``ddm.support._pairs``), as flat host arrays. Per fitted window (radius by radius: the
+    sampled windows, their neighbours to the right, those below; a neighbour past the image
+    is the window itself): ``idx`` the pixels of its offsets (padded with 0 past ``k``),
+    ``du``, ``dv`` the offsets (0 past ``k``), ``k`` how many, ``least`` the valid count a fit
+    needs, ``cv``, ``cu`` its centre. Per pair row (radius by radius, right neighbours then
+    those below): ``first`` and ``second`` its windows in that list, ``inside`` whether the
+    neighbour lies in the image, ``centre`` the first window's centre pixel, ``tile`` its
+    noise tile; ``counts`` the rows of each radius."""
+    kmax = max(((2 * r) // sample_every(r) + 1) ** 2 for r in radii)
+    tw = (w + TILE - 1) // TILE
+    parts: dict[str, list[np.ndarray]] = {k: [] for k in (
+        "idx", "du", "dv", "k", "least", "cv", "cu", "first", "second", "inside", "centre", "tile")}
+    counts, base = [], 0
+    for r in radii:
+        step, every, d = sample_step(h, w, r), sample_every(r), 2 * r + 1
+        gv, gu = (a.reshape(-1) for a in np.meshgrid(np.arange(r, h - r, step),
+                                                     np.arange(r, w - r, step), indexing="ij"))
+        n = gv.size
+        counts.append(2 * n)
+        off = np.arange(-r, r + 1, every)
+        dv, du = (a.reshape(-1) for a in np.meshgrid(off, off, indexing="ij"))
+        k = du.size
+        ins = [(gv + d * o < h - r) & (gu + d * (1 - o) < w - r) for o in range(2)]
+        cv = np.concatenate([gv] + [np.where(i, gv + d * o, gv) for o, i in enumerate(ins)])
+        cu = np.concatenate([gu] + [np.where(i, gu + d * (1 - o), gu) for o, i in enumerate(ins)])
+        for name, val in (("idx", (cv[:, None] + dv) * w + cu[:, None] + du),
+                          ("du", np.broadcast_to(du, (3 * n, k))),
+                          ("dv", np.broadcast_to(dv, (3 * n, k)))):
+            a = np.zeros((3 * n, kmax), np.int64)
+            a[:, :k] = val
+            parts[name].append(a)
+        parts["k"].append(np.full(3 * n, k))
+        parts["cv"].append(cv)
+        parts["cu"].append(cu)
+        parts["least"].append(np.full(3 * n, MIN_VALID * ((2 * r) // every + 1) ** 2))
+        for o in range(2):
+            parts["first"].append(base + np.arange(n))
+            parts["second"].append(base + n * (o + 1) + np.arange(n))
+            parts["inside"].append(ins[o])
+            parts["centre"].append(gv * w + gu)
+            parts["tile"].append((gv // TILE) * tw + gu // TILE)
+        base += 3 * n
+    out = {name: np.concatenate(v) for name, v in parts.items()}
+    out["counts"] = np.array(counts, np.int64)
+    return out
+
+
+_ON_DEVICE: dict[tuple, dict[str, torch.Tensor]] = {}
+
+
+def _device_layout(h: int, w: int, radii: tuple[int, ...], dev: torch.device,
+                   dtype: torch.dtype) -> dict[str, torch.Tensor]:
+    """:func:`_layout` on ``dev`` (offsets in ``dtype``), kept per device: built once."""
+    key = (h, w, radii, str(dev), dtype)
+    lay = _ON_DEVICE.get(key)
+    if lay is None:
+        host = _layout(h, w, radii)
+        lay = {name: torch.from_numpy(np.ascontiguousarray(a)).to(dev) for name, a in host.items()}
+        for name in ("du", "dv", "least", "cv", "cu"):
+            lay[name] = lay[name].to(dtype)
+        lay["pad"] = torch.arange(host["idx"].shape[1], device=dev) < lay["k"][:, None]
+        if len(_ON_DEVICE) > 32:
+            _ON_DEVICE.clear()
+        _ON_DEVICE[key] = lay
+    return lay
+
+
+def _fit(zf: torch.Tensor, lay: dict[str, torch.Tensor], cam):
+    """Least-squares planes of ``1 / z`` over the windows of ``lay`` (:func:`_layout`) of
+    every frame of ``zf`` (B, H * W) float64, NaN at invalid pixels: (residual variance in
+    footprints^2 (B, N), unit normal (B, N, 3)), NaN where no fit (``ddm.support._fit``)."""
     fx, fy, cx, cy = cam  # (B, 1) each
-    off = torch.arange(-r, r + 1, every, device=zf.device)
-    dv, du = torch.meshgrid(off, off, indexing="ij")
-    dv, du = dv.reshape(-1), du.reshape(-1)
-    idx = (centres[:, 0:1] + dv) * w + centres[:, 1:2] + du  # (N, k)
-    zz = zf[:, idx]  # (B, N, k)
-    ok = ~torch.isnan(zz)
+    zz = zf[:, lay["idx"]]  # (B, N, k)
+    ok = ~torch.isnan(zz) & lay["pad"]
     x = torch.where(ok, 1.0 / torch.where(ok, zz, 1.0), 0.0)
     m = ok.to(zf.dtype)
-    fu, fv = du.to(zf.dtype), dv.to(zf.dtype)
+    fu, fv = lay["du"], lay["dv"]
     n = m.sum(-1)
     sums = (n, (m * fu).sum(-1), (m * fv).sum(-1), (m * fu * fu).sum(-1), (m * fu * fv).sum(-1),
             (m * fv * fv).sum(-1), x.sum(-1), (x * fu).sum(-1), (x * fv).sum(-1), (x * x).sum(-1))
     pa, pb, c, rss, good = _solve(*sums)
-    good = good & (n >= MIN_VALID * ((2 * r) // every + 1) ** 2) & (c > 0.0)
-    cv = centres[:, 0].to(zf.dtype)
-    cu = centres[:, 1].to(zf.dtype)
+    good = good & (n >= lay["least"]) & (c > 0.0)
+    cv, cu = lay["cv"], lay["cu"]
     nx = fx * pa
     ny = fy * pb
     nz = c - pa * (cu - cx) - pb * (cv - cy)
@@ -57,42 +130,23 @@ def _fit(zf: torch.Tensor, centres: torch.Tensor, r: int, every: int, w: int, ca
     return torch.where(good, res, nan), torch.where(good[..., None], normal, nan[..., None])
 
 
-def _pairs(zf: torch.Tensor, h: int, w: int, r: int, cam) -> tuple[torch.Tensor, torch.Tensor]:
-    """The rows of ``ddm.support._pairs`` for every frame: (B, P, 4) (angle in degrees, the
-    larger residual variance, the first window's depth, the index of its noise tile) and (B,
-    P) where a row exists."""
-    step = sample_step(h, w, r)
-    every = sample_every(r)
-    d = 2 * r + 1
-    dev = zf.device
-    vs = torch.tensor(list(range(r, h - r, step)), dtype=torch.long, device=dev)
-    us = torch.tensor(list(range(r, w - r, step)), dtype=torch.long, device=dev)
-    if vs.numel() == 0 or us.numel() == 0:  # the image is smaller than one window
-        return zf.new_zeros((zf.shape[0], 0, 4)), torch.zeros((zf.shape[0], 0), dtype=torch.bool, device=dev)
-    gv, gu = torch.meshgrid(vs, us, indexing="ij")
-    c0 = torch.stack((gv.reshape(-1), gu.reshape(-1)), 1)
-    n = c0.shape[0]
-    shifted = [c0 + torch.tensor([d * o, d * (1 - o)], device=dev) for o in range(2)]
-    insides = [(c1[:, 0] < h - r) & (c1[:, 1] < w - r) for c1 in shifted]
-    # the window, its neighbour to the right and the one below, in one call (a third of the
-    # kernel launches: eager on a GPU this step was launch-bound)
-    cs = torch.cat([c0] + [torch.where(i[:, None], c1, c0) for c1, i in zip(shifted, insides, strict=True)])
-    s_all, n_all = _fit(zf, cs, r, every, w, cam)
-    s0, n0 = s_all[:, :n], n_all[:, :n]
-    zc = zf[:, c0[:, 0] * w + c0[:, 1]]
-    tw = (w + TILE - 1) // TILE
-    tile = ((c0[:, 0] // TILE) * tw + c0[:, 1] // TILE).to(zf.dtype)[None]
-    first = ~torch.isnan(zc) & ~torch.isnan(s0)
-    rows, oks = [], []
-    for o in range(2):
-        inside = insides[o]
-        s1, n1 = s_all[:, n * (o + 1):n * (o + 2)], n_all[:, n * (o + 1):n * (o + 2)]
-        ok = first & inside & ~torch.isnan(s1)
-        dot = torch.clamp((n0 * n1).sum(-1), -1.0, 1.0)
-        ang = torch.rad2deg(torch.acos(torch.where(ok, dot, 1.0)))
-        rows.append(torch.stack((ang, torch.maximum(s0, s1), zc, tile.expand_as(zc)), -1))
-        oks.append(ok)
-    return torch.cat(rows, 1), torch.cat(oks, 1)
+def _pairs(zf: torch.Tensor, h: int, w: int, radii: tuple[int, ...], cam) -> list[tuple]:
+    """The rows of ``ddm.support._pairs`` of every frame for each of ``radii``, on the host:
+    ``(rows (B, P, 4), ok (B, P))`` (angle in degrees, the larger residual variance, the first
+    window's depth, the index of its noise tile; where a row exists), one transfer."""
+    lay = _device_layout(h, w, radii, zf.device, zf.dtype)
+    s_all, n_all = _fit(zf, lay, cam)
+    i0, i1 = lay["first"], lay["second"]
+    s0, s1 = s_all[:, i0], s_all[:, i1]
+    zc = zf[:, lay["centre"]]
+    ok = ~torch.isnan(zc) & ~torch.isnan(s0) & lay["inside"] & ~torch.isnan(s1)
+    dot = torch.clamp((n_all[:, i0] * n_all[:, i1]).sum(-1), -1.0, 1.0)
+    ang = torch.rad2deg(torch.acos(torch.where(ok, dot, 1.0)))
+    tile = lay["tile"].to(zf.dtype)[None].expand_as(zc)
+    rows = torch.stack((ang, torch.maximum(s0, s1), zc, tile), -1).cpu().numpy()
+    oks = ok.cpu().numpy()
+    cuts = np.cumsum(_layout(h, w, radii)["counts"])[:-1]
+    return list(zip(np.split(rows, cuts, axis=1), np.split(oks, cuts, axis=1), strict=True))
 
 
 def support_profiles(z: torch.Tensor, cam, sigmas: list[float],
@@ -106,8 +160,7 @@ def support_profiles(z: torch.Tensor, cam, sigmas: list[float],
     with torch.no_grad():
         zf = z.reshape(b, -1)
         c = tuple(q.reshape(-1, 1).to(z.dtype).expand(b, 1) for q in cam)
-        per_radius = [_pairs(zf, h, w, r, c) for r in RADII]
-        host = [(rows.cpu().numpy(), ok.cpu().numpy()) for rows, ok in per_radius]
+        host = [t for radii in GROUPS for t in _pairs(zf, h, w, radii, c)]
     lev = None if tiles is None else tiles.cpu().numpy()
     return profiles_from_pair_tables(host, sigmas, tiles=lev)
 
