@@ -114,6 +114,40 @@ def test_real_frames(shared_data):
         _check([f.depth.astype(np.float64) for f in group], [f.K for f in group], f"real {shape}")
 
 
+@pytest.mark.parametrize("elements", ["all", "three"])
+def test_the_stacked_path_of_an_accelerator_gives_the_same_bits(shared_data, monkeypatch, elements):
+    """On a GPU the neighbour loops (the face switch's eight directions, choose_local's 3x3)
+    run stacked (``_common.stack_width``); here on the CPU, all at once and three at a time
+    (the face switch's directions then in chunks of 3, 3, 2: the first least distance across
+    chunks), the normals and their gradients equal the one-by-one loop's to the bit, on the
+    box-fit and measured-support frames and a real frame with creases (the face switch)."""
+    from depthnormals.datasets.realsensors import read_realsensors
+    from depthnormals.torch import _common
+
+    real = next(f for f in read_realsensors(shared_data / "real-sensors") if f.depth.shape == (480, 640))
+    batches = [(np.stack([z for label, z in FRAMES if "clean" not in label]), K_SMALL),
+               (real.depth[None, 100:260, 200:440].astype(np.float64), real.K)]
+
+    def run():
+        out = []
+        for depth, K in batches:
+            t = torch.from_numpy(depth)[:, None].requires_grad_(True)
+            n = dt.estimate_normals(t, K)
+            ok = torch.isfinite(n).all(1, keepdim=True)
+            w = torch.tensor([0.3, -0.5, 0.8], dtype=n.dtype).reshape(1, 3, 1, 1)
+            (torch.where(ok, n, 0.0) * w).sum().backward()
+            out.append((n.detach(), t.grad))
+        return out
+
+    ref = run()
+    monkeypatch.setattr(_common, "STACK_ON_CPU", True)
+    if elements == "three":
+        monkeypatch.setattr(_common, "STACK_ELEMENTS", 3 * batches[0][0].size)
+    assert _common.stack_width(torch.from_numpy(batches[0][0]), 8) == (8 if elements == "all" else 3)
+    for (n0, g0), (n1, g1) in zip(ref, run(), strict=True):
+        assert torch.equal(torch.nan_to_num(n0), torch.nan_to_num(n1)) and torch.equal(g0, g1)
+
+
 def test_the_local_excess_branch():
     """A frame whose image-wide excess reads independent noise and whose pair-by-pair excess
     does not (active stereo growing with depth, tests/test_ddm_support.py): both libraries

@@ -30,6 +30,7 @@ from ..ddm.auto import _slopes as _auto_slopes
 from ..ddm.boxfit import LOCAL_CAP, MIN_POINTS, SHIFTS
 from ..ddm.support import DEVIATION, FALLBACK_RADIUS
 from ..kernels.eig3 import sym3_adjugate_apply
+from ._common import stack_width
 
 __all__ = ["Fits", "box_fits", "choose_least", "choose_local", "choose_plain", "keep_estimator",
            "upsample_half"]
@@ -230,10 +231,10 @@ def choose_local(zs, valid, fits: Fits, big: Fits | None, shift: int, gate: torc
         u = torch.arange(w, dtype=zs.dtype, device=zs.device).reshape(1, 1, w)
         v = torch.arange(h, dtype=zs.dtype, device=zs.device).reshape(1, h, 1)
         kc_all = pc - pa * u - pb * v  # the plane in image coordinates, at its own window
-        # the 3x3 stacked (9, B, H, W): z fsd, u, v, ok (one kernel a step for all nine: eager
-        # on a GPU this loop was launch-bound); the nine terms are then added in the numba
-        # kernel's order
+        # the 3x3 stacked (9, B, H, W): z fsd, u, v, ok, its residuals computed ``g`` at a
+        # time (:func:`._common.stack_width`) and added in the numba kernel's order
         nine = [(dv, du) for dv in (-1, 0, 1) for du in (-1, 0, 1)]
+        g = stack_width(zd, 9)
         zp, vp = F.pad(zd, (1, 1, 1, 1), value=1.0), F.pad(valid, (1, 1, 1, 1), value=False)
         zi = torch.stack([zp[..., 1 + dv:1 + dv + h, 1 + du:1 + du + w] for dv, du in nine]) * fsd
         oki = torch.stack([vp[..., 1 + dv:1 + dv + h, 1 + du:1 + du + w] for dv, du in nine])
@@ -248,11 +249,12 @@ def choose_local(zs, valid, fits: Fits, big: Fits | None, shift: int, gate: torc
             sv, su = p + shift * dv, p + shift * du
             ka, kb, kc, sc = (q[..., sv:sv + h, su:su + w] for q in padded)
             exists = sc < float("inf")
-            res = fsd - zi * (ka * ui + kb * vi + kc)
-            terms = torch.where(oki, torch.clamp(res * res, max=LOCAL_CAP), 0.0)
             sk = torch.zeros_like(zd)
-            for t in terms:
-                sk = sk + t
+            for j in range(0, 9, g):
+                sl = slice(j, j + g)
+                res = fsd - zi[sl] * (ka * ui[sl] + kb * vi[sl] + kc)
+                for t in torch.where(oki[sl], torch.clamp(res * res, max=LOCAL_CAP), 0.0):
+                    sk = sk + t
             sk = torch.where(exists, sk, float("inf"))
             take = sk < best
             best = torch.where(take, sk, best)

@@ -16,6 +16,7 @@ import torch
 
 from ..ddm.faceswitch import ANGLE, DIRECTIONS, JUMP, MARGIN
 from ._common import shift as _at
+from ._common import stack_width
 
 __all__ = ["switch_faces"]
 
@@ -84,12 +85,12 @@ def switch_faces(z: torch.Tensor, n: tuple, cam, span: int) -> tuple:
         inf = torch.full_like(z, math.inf)
         other, same = inf, distance(nf, s)
         best = torch.full(z.shape, -1, dtype=torch.long, device=dev)
-        # the neighbours of every direction of a chunk at once (few kernel launches: eager on
-        # a GPU this loop was launch-bound), the chunk sized to bound the memory; the first
-        # least distance wins, as the numba kernel's loop over the directions takes it
+        # the directions in chunks (:func:`._common.stack_width`: all eight at once on a GPU,
+        # one by one on the CPU); the first least distance wins, as the numba kernel's loop
+        # over the directions takes it
         nfp = _padded(torch.stack(nf), span, math.nan)
         sp = _padded(s[:4], span, 0.0)
-        per = max(1, min(len(_DIRECTIONS), _CHUNK // max(1, z.numel())))
+        per = stack_width(z, len(_DIRECTIONS))
         for k0 in range(0, len(_DIRECTIONS), per):
             ks = _DIRECTIONS[k0:k0 + per]
             qn = torch.stack([_view(nfp, span, span * dv, span * du, h, w) for dv, du in ks], 1)
@@ -117,10 +118,6 @@ def switch_faces(z: torch.Tensor, n: tuple, cam, span: int) -> tuple:
                       torch.arange(h * w, device=dev).reshape(1, h, w)).reshape(z.shape[0], -1)
     out = [torch.gather(q.reshape(z.shape[0], -1), 1, src).reshape(z.shape) for q in (nx, ny, nz)]
     return (*out, ok), switch
-
-
-#: Elements (directions x frames x pixels) of one chunk of the face switch's directions.
-_CHUNK = 1 << 23
 
 
 def _padded(x: torch.Tensor, p: int, fill: float) -> torch.Tensor:
