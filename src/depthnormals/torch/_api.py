@@ -279,10 +279,9 @@ def estimate_normals(depth: torch.Tensor, K: Any, *, method: str = "3f2n+",
         if not on_numba and (backend == "torch" or _grad_wanted(depth, K)):
             n = estimate_normals(depth, K, method=method, depth_scale=depth_scale, invalid=invalid,
                                  backend="torch", **options)
-        dev = depth.device
-        unc = unc.to(dev)
+        n, unc = n.to(depth.device), unc.to(depth.device)
         none = unc.new_tensor(float("nan") if invalid == "nan" else 0.0)
-        return n.to(dev), torch.where(normals_mask(n), unc, none)
+        return n, torch.where(normals_mask(n), unc, none)
     if on_numba:
         return _numba_backend(depth, K, method, depth_scale, invalid, options, out_dtype)
     auto = method.endswith("+") and o["selection"] in ("auto", "box-fit")
