@@ -230,6 +230,26 @@ def test_cli_undistorts_a_depth_file_and_records_it(tmp_path, capsys):
     assert "settings" in capsys.readouterr().err.lower()
 
 
+def test_a_frame_whose_reader_undid_its_lens_refuses_a_second_distortion(tmp_path, capsys):
+    """A real-sensor folder's reader undoes the folder's lens; ``--distortion`` (``distortion=``)
+    on that folder would undo it again: refused, naming the frame, before any output. Without
+    it the folder runs and gives the reader's undistorted normals."""
+    from depthnormals.cli import main
+    from depthnormals.datasets.realsensors import read_realsensors
+    from depthnormals.jobs import run_estimate
+
+    with pytest.raises(ValueError, match="undone the frame's lens already"):
+        run_estimate([TOF], tmp_path / "twice", method="3f2n+", distortion=DIST)
+    assert not (tmp_path / "twice").exists() or not any((tmp_path / "twice").rglob("*.npy"))
+    assert main(["estimate", str(TOF), "-o", str(tmp_path / "cli"), "-q", "--distortion",
+                 ",".join(map(str, DIST))]) != 0
+    assert "twice" in capsys.readouterr().err
+    assert main(["estimate", str(TOF), "-o", str(tmp_path / "once"), "-q"]) == 0
+    (frame,) = read_realsensors(TOF)
+    (out,) = (tmp_path / "once").rglob("*.npy")
+    np.testing.assert_array_equal(np.load(out), dn.estimate_normals(frame.depth, frame.K))
+
+
 def test_cli_refuses_a_bad_distortion(tmp_path, capsys):
     from depthnormals.cli import main
 

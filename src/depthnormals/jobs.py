@@ -104,6 +104,8 @@ class EstimateJob:
         The depth of a dataset frame, metres.
     label : str
         Name shown by the progress bar.
+    undistorted : bool
+        A dataset frame whose reader has undone its lens already (``meta["undistorted"]``).
     """
 
     output: Path
@@ -111,6 +113,7 @@ class EstimateJob:
     source: Path | None = None
     depth: np.ndarray | None = field(default=None, repr=False, compare=False)
     label: str = ""
+    undistorted: bool = False
 
 
 @dataclass(frozen=True)
@@ -258,7 +261,7 @@ def plan_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, K: Any =
         for f in frames:
             rel = f"{f.group}/{f.name}" if f.group else f.name
             yield job(out / f"{rel}.{fmt}", f"{path}:{rel}", K=as_intrinsics(f.K), depth=f.depth,
-                      label=rel)
+                      label=rel, undistorted=bool(f.meta.get("undistorted")))
 
     for item in inputs:
         text = str(item)
@@ -582,9 +585,10 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
         The lens distortion of the depth images (OpenCV's order, ``k1, k2, p1, p2[, k3[, k4,
         k5, k6[, s1, s2, s3, s4]]]``): each frame is resampled onto the pinhole grid of its
         ``K`` before its normals (:func:`depthnormals.undistort_depth`); the outputs, a
-        ``.ply``'s points included, are on that grid. Dataset frames too: a reader that
-        undoes its own lens (a real-sensor folder's ``distortion``, a ROS bag's camera) has
-        done it already. Recorded in the manifest.
+        ``.ply``'s points included, are on that grid. Dataset frames too, but a frame whose
+        reader has undone its lens already (a real-sensor folder's ``distortion``, a ROS bag's
+        camera: ``meta["undistorted"]``) raises ValueError rather than be undone twice.
+        Recorded in the manifest.
 
     Returns
     -------
@@ -642,6 +646,9 @@ def run_estimate(inputs: Sequence[str | Path], out_dir: str | Path, *, method: s
     def todo() -> Iterator[EstimateJob]:
         for job in plan_estimate(inputs, out, K=K, fmt=fmt,
                                  on_skip=lambda p, why: not_depth.append((str(p), why))):
+            if settings.distortion and job.undistorted:
+                raise ValueError(f"{job.label}: its reader has undone the frame's lens already; "
+                                 "distortion (--distortion) would undo it twice: leave it out")
             counts["planned"] += 1
             if not trusted and not fresh:
                 planned.add(job.output)

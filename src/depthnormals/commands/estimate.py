@@ -57,8 +57,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the lens distortion of the depth images, OpenCV's order (4, 5, 8 or 12 "
                              "numbers): each is resampled onto the pinhole grid of its camera first "
                              "(nearest pixel), dataset frames too (a real-sensor folder or ROS bag "
-                             "that gives its own lens is undistorted by its reader: do not pass it "
-                             "again); default the camera file's distortion, else none")
+                             "that gives its own lens is undistorted by its reader, and such a frame "
+                             "refuses it: it would be undone twice); default the camera file's "
+                             "distortion, else none")
     parser.add_argument("--vis", default="3f2n", choices=("3f2n", "open3d"),
                         help=".vis.png colouring: 3f2n = (1 - n) / 2 (default, the 3F2N papers'), "
                              "open3d = (n + 1) / 2 (Open3D's and most viewers')")
