@@ -148,6 +148,33 @@ def test_the_stacked_path_of_an_accelerator_gives_the_same_bits(shared_data, mon
         assert torch.equal(torch.nan_to_num(n0), torch.nan_to_num(n1)) and torch.equal(g0, g1)
 
 
+@pytest.mark.parametrize("label, most", [("demo-room kinect_v1", 2400), ("demo-room tof", 1850),
+                                         ("demo-room clean", 1550)])
+def test_the_accelerator_path_launches_few_operations(monkeypatch, label, most):
+    """Eager torch on a GPU is bound by its kernel launches (docs/torch.md, session 36): the
+    operations of one call on the accelerator's path (stacked), counted on the CPU, stay near
+    what they were measured at when the launch-bound steps were fused (2051 measured support,
+    1594 box-fit, 1346 clean; before the fusion 4455 and 4005): a change that loops again
+    over radii, directions or windows fails here."""
+    from torch.utils._python_dispatch import TorchDispatchMode
+
+    from depthnormals.torch import _common
+
+    class Count(TorchDispatchMode):
+        n = 0
+
+        def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+            Count.n += 1
+            return func(*args, **(kwargs or {}))
+
+    monkeypatch.setattr(_common, "STACK_ON_CPU", True)
+    z = torch.from_numpy(np.stack([dict(FRAMES)[label]] * 2))[:, None]
+    dt.estimate_normals(z, K_SMALL, backend="torch")
+    with Count():
+        dt.estimate_normals(z, K_SMALL, backend="torch")
+    assert 0.7 * most < Count.n <= most
+
+
 def test_the_local_excess_branch():
     """A frame whose image-wide excess reads independent noise and whose pair-by-pair excess
     does not (active stereo growing with depth, tests/test_ddm_support.py): both libraries
