@@ -30,7 +30,7 @@ from ..ddm.auto import _slopes as _auto_slopes
 from ..ddm.boxfit import LOCAL_CAP, MIN_POINTS, SHIFTS
 from ..ddm.support import DEVIATION, FALLBACK_RADIUS
 from ..kernels.eig3 import sym3_adjugate_apply
-from ._common import stack_width
+from ._common import shifted_views, stack_width
 
 __all__ = ["Fits", "box_fits", "choose_least", "choose_local", "choose_plain", "keep_estimator",
            "upsample_half"]
@@ -180,11 +180,7 @@ def _least_shifted(s0: torch.Tensor, shift: int, shifts) -> tuple[torch.Tensor, 
     """The least of ``s0`` read at the offsets ``shifts`` (times ``shift``; inf outside the
     image, NaN read as inf) and the index of the first that holds it: the running ``sk <
     best`` of the numba kernels over the windows in order, in a few kernel launches."""
-    p = shift * max(max(abs(dv), abs(du)) for dv, du in shifts)
-    h, w = s0.shape[-2:]
-    sp = F.pad(s0, (p, p, p, p), value=float("inf"))
-    sk = torch.stack([sp[..., p + shift * dv:p + shift * dv + h, p + shift * du:p + shift * du + w]
-                      for dv, du in shifts])
+    sk = torch.stack(shifted_views(s0, [(shift * dv, shift * du) for dv, du in shifts], float("inf")))
     return torch.where(sk == sk, sk, float("inf")).min(0)
 
 
@@ -235,19 +231,17 @@ def choose_local(zs, valid, fits: Fits, big: Fits | None, shift: int, gate: torc
         # time (:func:`._common.stack_width`) and added in the numba kernel's order
         nine = [(dv, du) for dv in (-1, 0, 1) for du in (-1, 0, 1)]
         g = stack_width(zd, 9)
-        zp, vp = F.pad(zd, (1, 1, 1, 1), value=1.0), F.pad(valid, (1, 1, 1, 1), value=False)
-        zi = torch.stack([zp[..., 1 + dv:1 + dv + h, 1 + du:1 + du + w] for dv, du in nine]) * fsd
-        oki = torch.stack([vp[..., 1 + dv:1 + dv + h, 1 + du:1 + du + w] for dv, du in nine])
+        zi = torch.stack(shifted_views(zd, nine, 1.0)) * fsd
+        oki = torch.stack(shifted_views(valid, nine, False))
         ui = torch.stack([u + du for _, du in nine])
         vi = torch.stack([v + dv for dv, _ in nine])
-        p = shift
-        padded = [F.pad(q, (p, p, p, p), value=f) for q, f in
-                  ((pa, 0.0), (pb, 0.0), (kc_all, 0.0), (fits.score, float("inf")))]
+        offsets = [(shift * dv, shift * du) for dv, du in _SHIFTS]
+        views = [shifted_views(q, offsets, f) for q, f in
+                 ((pa, 0.0), (pb, 0.0), (kc_all, 0.0), (fits.score, float("inf")))]
         best = torch.full_like(zd, float("inf"))
         kbest = torch.zeros(zd.shape, dtype=torch.long, device=zd.device)
-        for i, (dv, du) in enumerate(_SHIFTS):
-            sv, su = p + shift * dv, p + shift * du
-            ka, kb, kc, sc = (q[..., sv:sv + h, su:su + w] for q in padded)
+        for i in range(len(_SHIFTS)):
+            ka, kb, kc, sc = (q[i] for q in views)
             exists = sc < float("inf")
             sk = torch.zeros_like(zd)
             for j in range(0, 9, g):

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import numbers
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -22,7 +23,7 @@ from ..camera import Intrinsics, as_intrinsics
 from ..kernels.orient import TIE_COS2
 
 __all__ = ["STACK_ELEMENTS", "STACK_ON_CPU", "Camera", "Grid", "camera", "finish", "oriented", "prepare",
-           "shift", "stack_width"]
+           "shift", "shifted_views", "stack_width"]
 
 
 @dataclass(frozen=True)
@@ -179,12 +180,17 @@ def stack_width(x: torch.Tensor, n: int) -> int:
 def shift(x: torch.Tensor, dv: int, du: int, fill: float | bool) -> torch.Tensor:
     """``x`` (B, H, W) read at offset (dv, du): ``out[v, u] = x[v + dv, u + du]``, ``fill``
     outside the image (a padded copy, then a view)."""
+    return x if dv == du == 0 else shifted_views(x, [(dv, du)], fill)[0]
+
+
+def shifted_views(x: torch.Tensor, offsets: Sequence[tuple[int, int]],
+                  fill: float | bool) -> list[torch.Tensor]:
+    """``x`` (..., H, W) read at each of ``offsets`` (dv, du): ``out[k][..., v, u] = x[..., v +
+    dv, u + du]``, ``fill`` outside the image; views of one padded copy (one kernel for all)."""
     h, w = x.shape[-2:]
-    p = max(abs(dv), abs(du))
-    if p == 0:
-        return x
-    xp = F.pad(x, (p, p, p, p), value=fill)
-    return xp[:, p + dv:p + dv + h, p + du:p + du + w]
+    p = max([max(abs(dv), abs(du)) for dv, du in offsets] + [0])
+    xp = F.pad(x, (p, p, p, p), value=fill) if p else x
+    return [xp[..., p + dv:p + dv + h, p + du:p + du + w] for dv, du in offsets]
 
 
 def oriented(nx: torch.Tensor, ny: torch.Tensor, nz: torch.Tensor, cam: Camera,

@@ -16,7 +16,7 @@ import torch
 
 from ..ddm.faceswitch import ANGLE, DIRECTIONS, JUMP, MARGIN
 from ._common import shift as _at
-from ._common import stack_width
+from ._common import shifted_views, stack_width
 
 __all__ = ["switch_faces"]
 
@@ -88,13 +88,13 @@ def switch_faces(z: torch.Tensor, n: tuple, cam, span: int) -> tuple:
         # the directions in chunks (:func:`._common.stack_width`: all eight at once on a GPU,
         # one by one on the CPU); the first least distance wins, as the numba kernel's loop
         # over the directions takes it
-        nfp = _padded(torch.stack(nf), span, math.nan)
-        sp = _padded(s[:4], span, 0.0)
+        offsets = [(span * dv, span * du) for dv, du in _DIRECTIONS]
+        nfs = shifted_views(torch.stack(nf), offsets, math.nan)
+        ss = shifted_views(s[:4], offsets, 0.0)
         per = stack_width(z, len(_DIRECTIONS))
         for k0 in range(0, len(_DIRECTIONS), per):
-            ks = _DIRECTIONS[k0:k0 + per]
-            qn = torch.stack([_view(nfp, span, span * dv, span * du, h, w) for dv, du in ks], 1)
-            qs = torch.stack([_view(sp, span, span * dv, span * du, h, w) for dv, du in ks], 1)
+            qn = torch.stack(nfs[k0:k0 + per], 1)
+            qs = torch.stack(ss[k0:k0 + per], 1)
             dot = nf[0] * qn[0] + nf[1] * qn[1] + nf[2] * qn[2]
             dot = torch.where(dot == dot, dot, torch.full_like(dot, 2.0))
             m = distance(qn, qs)
@@ -118,13 +118,3 @@ def switch_faces(z: torch.Tensor, n: tuple, cam, span: int) -> tuple:
                       torch.arange(h * w, device=dev).reshape(1, h, w)).reshape(z.shape[0], -1)
     out = [torch.gather(q.reshape(z.shape[0], -1), 1, src).reshape(z.shape) for q in (nx, ny, nz)]
     return (*out, ok), switch
-
-
-def _padded(x: torch.Tensor, p: int, fill: float) -> torch.Tensor:
-    """``x`` (..., H, W) padded by ``p`` on every side with ``fill``."""
-    return torch.nn.functional.pad(x, (p, p, p, p), value=fill)
-
-
-def _view(xp: torch.Tensor, p: int, dv: int, du: int, h: int, w: int) -> torch.Tensor:
-    """The padded ``xp`` read at offset (dv, du): :func:`._common.shift` of the unpadded."""
-    return xp[..., p + dv:p + dv + h, p + du:p + du + w]
