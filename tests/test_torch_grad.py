@@ -78,7 +78,7 @@ def test_one_graph_no_host_sync(method):
     """torch._dynamo traces every method into one graph with no break: no ``.item()``, no
     branching on tensor values, nothing that leaves the graph (slow: ~20 s each here). The
     module with an explicit selection; ``selection="auto"`` (the default) reads each frame's
-    noise on the host to choose its branch (test_default_breaks_once_for_the_branch)."""
+    noise on the host to choose its branch: a graph break there (test_compiled_default_on_sensor_depth)."""
     K = torch.tensor([60.0, 60.0, 4.0, 3.5])
     opts = {"selection": "planes"} if method.endswith("+") else {}
     ex = torch._dynamo.explain(lambda z: dt.estimate_normals(z, K, method=method, backend="torch", **opts))(
@@ -97,3 +97,30 @@ def test_torch_compile_cpu():
     f = torch.compile(lambda d: dt.estimate_normals(d, K, method="3f2n", backend="torch"), fullgraph=True)
     torch.testing.assert_close(f(z), dt.estimate_normals(z, (20.0, 20.0, 7.5, 5.5), method="3f2n"),
                                equal_nan=True, atol=1e-5, rtol=1e-5)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model", ["kinect_v1", "gaussian"])
+def test_compiled_default_on_sensor_depth(model):
+    """The default on sensor depth (the measured support, kinect_v1, and the box-fit,
+    Gaussian: the noise and the support profile are read on the host, so the graph breaks
+    there) runs under ``torch.compile`` (dynamo with its eager backend: the tracing, breaks and
+    guards, without inductor's minutes of code generation) and gives the eager call's bits,
+    twice (the second call reuses the guards). Before session 36 the measured support failed
+    here: dynamo traced the profile's numpy choice (``depth_exponent``: TypeError)."""
+    from depthnormals.analytic import make_scene
+    from depthnormals.synth import noise as sensor
+
+    K = (120.0, 120.0, 39.5, 29.5)
+    r = make_scene("demo-room").render(K=K, shape=(60, 80))
+    def draw(s):
+        rng = np.random.default_rng(s)
+        if model == "gaussian":
+            return sensor.gaussian_noise(r.depth, K, rng=rng, sigma_px=0.3)
+        return sensor.kinect_v1_noise(r.depth, r.normals, K, rng=rng)
+
+    z = torch.from_numpy(np.stack([np.asarray(draw(s)) for s in range(2)]))[:, None]
+    eager = dt.estimate_normals(z, K, backend="torch")
+    f = torch.compile(lambda d: dt.estimate_normals(d, K, backend="torch"), backend="eager")
+    for _ in range(2):
+        assert torch.equal(torch.nan_to_num(f(z)), torch.nan_to_num(eager))

@@ -10,8 +10,6 @@ takes them), so both take the same decisions. No gradients (the profile only cho
 
 from __future__ import annotations
 
-import functools
-
 import numpy as np
 import torch
 
@@ -34,7 +32,6 @@ __all__ = ["support_profiles"]
 GROUPS = ((1, 2, 3, 4, 6, 8), (11, 16))
 
 
-@functools.lru_cache(maxsize=16)
 def _layout(h: int, w: int, radii: tuple[int, ...]) -> dict[str, np.ndarray]:
     """Where the sampled windows of ``radii`` on an ``h x w`` image read (the grid of
     ``ddm.support._pairs``), as flat host arrays. Per fitted window (radius by radius: the
@@ -84,15 +81,16 @@ def _layout(h: int, w: int, radii: tuple[int, ...]) -> dict[str, np.ndarray]:
     return out
 
 
-_ON_DEVICE: dict[tuple, dict[str, torch.Tensor]] = {}
+_ON_DEVICE: dict[tuple, tuple[dict[str, torch.Tensor], tuple[int, ...]]] = {}
 
 
 def _device_layout(h: int, w: int, radii: tuple[int, ...], dev: torch.device,
-                   dtype: torch.dtype) -> dict[str, torch.Tensor]:
-    """:func:`_layout` on ``dev`` (offsets in ``dtype``), kept per device: built once."""
+                   dtype: torch.dtype) -> tuple[dict[str, torch.Tensor], tuple[int, ...]]:
+    """:func:`_layout` on ``dev`` (offsets in ``dtype``), kept per device, and where each
+    radius's pair rows end (but the last)."""
     key = (h, w, radii, str(dev), dtype)
-    lay = _ON_DEVICE.get(key)
-    if lay is None:
+    got = _ON_DEVICE.get(key)
+    if got is None:
         host = _layout(h, w, radii)
         lay = {name: torch.from_numpy(np.ascontiguousarray(a)).to(dev) for name, a in host.items()}
         for name in ("du", "dv", "least", "cv", "cu"):
@@ -100,8 +98,8 @@ def _device_layout(h: int, w: int, radii: tuple[int, ...], dev: torch.device,
         lay["pad"] = torch.arange(host["idx"].shape[1], device=dev) < lay["k"][:, None]
         if len(_ON_DEVICE) > 32:
             _ON_DEVICE.clear()
-        _ON_DEVICE[key] = lay
-    return lay
+        got = _ON_DEVICE[key] = (lay, tuple(int(c) for c in np.cumsum(host["counts"])[:-1]))
+    return got
 
 
 def _fit(zf: torch.Tensor, lay: dict[str, torch.Tensor], cam):
@@ -134,7 +132,7 @@ def _pairs(zf: torch.Tensor, h: int, w: int, radii: tuple[int, ...], cam) -> lis
     """The rows of ``ddm.support._pairs`` of every frame for each of ``radii``, on the host:
     ``(rows (B, P, 4), ok (B, P))`` (angle in degrees, the larger residual variance, the first
     window's depth, the index of its noise tile; where a row exists), one transfer."""
-    lay = _device_layout(h, w, radii, zf.device, zf.dtype)
+    lay, cuts = _device_layout(h, w, radii, zf.device, zf.dtype)
     s_all, n_all = _fit(zf, lay, cam)
     i0, i1 = lay["first"], lay["second"]
     s0, s1 = s_all[:, i0], s_all[:, i1]
@@ -145,10 +143,10 @@ def _pairs(zf: torch.Tensor, h: int, w: int, radii: tuple[int, ...], cam) -> lis
     tile = lay["tile"].to(zf.dtype)[None].expand_as(zc)
     rows = torch.stack((ang, torch.maximum(s0, s1), zc, tile), -1).cpu().numpy()
     oks = ok.cpu().numpy()
-    cuts = np.cumsum(_layout(h, w, radii)["counts"])[:-1]
     return list(zip(np.split(rows, cuts, axis=1), np.split(oks, cuts, axis=1), strict=True))
 
 
+@torch.compiler.disable  # read on the host and chosen in numpy: a compiled caller breaks here
 def support_profiles(z: torch.Tensor, cam, sigmas: list[float],
                      tiles: torch.Tensor | None = None) -> list[SupportProfile]:
     """The support profile of every frame of prepared depth ``z`` (B, H, W) float64 (NaN at
