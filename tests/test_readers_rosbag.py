@@ -33,7 +33,7 @@ def stored() -> np.ndarray:
 class Bag:
     """A bag written message by message (ROS 1 ``.bag`` or ROS 2 folder)."""
 
-    def __init__(self, path: Path, ros: int):
+    def __init__(self, path: Path, ros: int, mcap: bool = False):
         self.ros = ros
         self.ts = get_typestore(Stores.ROS1_NOETIC if ros == 1 else Stores.ROS2_HUMBLE)
         if ros == 1:
@@ -41,9 +41,10 @@ class Bag:
 
             self.w = Writer(path)
         else:
-            from rosbags.rosbag2 import Writer
+            from rosbags.rosbag2 import StoragePlugin, Writer
 
-            self.w = Writer(path, version=9)
+            self.w = Writer(path, version=9,
+                            storage_plugin=StoragePlugin.MCAP if mcap else StoragePlugin.SQLITE3)
         self.conns: dict = {}
         self.t = 0
 
@@ -153,10 +154,10 @@ def stored_metres() -> np.ndarray:
     return m
 
 
-def ros2_bag(path: Path) -> np.ndarray:
+def ros2_bag(path: Path, mcap: bool = False) -> np.ndarray:
     d = stored()
     m = stored_metres()
-    with Bag(path, 2) as b:
+    with Bag(path, 2, mcap) as b:
         b.camera("/camera/depth/camera_info", d.shape, dist=LENS)
         b.image("/camera/depth/image_raw", d, "16UC1")
         b.image("/camera/depth/image_rect_raw", d, "16UC1", big=True, pad=6)
@@ -189,6 +190,32 @@ def test_a_ros2_bag_with_a_lens(tmp_path):
     # undistort=False, and one topic
     (f,) = list(read_rosbag(bag, topic="/camera/depth/image_raw", undistort=False))
     np.testing.assert_array_equal(f.depth, metres)
+
+
+def test_a_ros2_mcap_bag_and_its_mcap_file_alone(tmp_path, capsys):
+    """MCAP storage (ROS 2's default since Iron): the bag folder, and its ``.mcap`` file given
+    on its own (detected by its magic), read the same frames as the sqlite3 bag; the command
+    line takes the file as a dataset."""
+    from depthnormals.cli import main
+
+    ros2_bag(tmp_path / "db3")
+    ros2_bag(tmp_path / "mcap", mcap=True)
+    (file,) = (tmp_path / "mcap").glob("*.mcap")
+    assert detect_format(file) == detect_format(tmp_path / "mcap") == "rosbag"
+    ref = list(read_rosbag(tmp_path / "db3"))
+    for src in (tmp_path / "mcap", file):
+        got = list(dn.datasets.open(src))
+        assert [f.meta["topic"] for f in got] == [f.meta["topic"] for f in ref]
+        for a, b in zip(got, ref, strict=True):
+            np.testing.assert_array_equal(a.depth, b.depth)
+            np.testing.assert_array_equal(a.K, b.K)
+            assert a.meta["undistorted"] == b.meta["undistorted"]
+    other = tmp_path / "x.mcap"
+    other.write_bytes(b"not an mcap file")
+    assert not dn.datasets.rosbag.is_rosbag(other)
+    out = tmp_path / "out"
+    assert main(["estimate", str(file), "-o", str(out), "-q"]) == 0
+    assert len(list(out.rglob("*.npy"))) == 3
 
 
 def test_errors_name_the_bag_and_what_is_missing(tmp_path):

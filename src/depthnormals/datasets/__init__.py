@@ -115,8 +115,8 @@ def detect_format(path: str | Path) -> str:
         "ScanNet export (depth/*.png + intrinsic/intrinsic_depth.txt), KITTI depth (proj_depth/ "
         "or groundtruth_depth/ + intrinsics/), NYU Depth v2 labeled .mat (HDF5 with 'depths'), "
         "Hypersim (*_geometry_hdf5/frame.IIII.depth_meters.hdf5), Replica renders as NICE-SLAM "
-        "publishes them (results/depth*.png), ROS bags (a ROS 1 .bag file or a ROS 2 bag "
-        "folder with depth images), real sensor folders (intrinsics.json + depth "
+        "publishes them (results/depth*.png), ROS bags (a ROS 1 .bag file, a ROS 2 bag "
+        "folder or its .mcap file, with depth images), real sensor folders (intrinsics.json + depth "
         "images, or a folder of them); pass format= to force one"
     )
 
@@ -153,9 +153,9 @@ def open(path: str | Path, *, format: str | None = None, intrinsics: Any = None,
       Replica renders (NICE-SLAM layout):
       see docs/datasets.md and each reader. Their frames carry ``normals=None`` when the
       dataset has no ground-truth normals (all but Hypersim);
-    - a ROS bag (a ROS 1 ``.bag`` file, the RealSense Viewer's recordings among them, or a
-      ROS 2 bag folder) with depth images: :func:`read_rosbag` (needs the ``rosbags``
-      package), groups the depth topics;
+    - a ROS bag (a ROS 1 ``.bag`` file, the RealSense Viewer's recordings among them, a
+      ROS 2 bag folder or a ROS 2 ``.mcap`` file) with depth images: :func:`read_rosbag`
+      (needs the ``rosbags`` package), groups the depth topics;
     - last, a real sensor folder (``intrinsics.json`` + depth images at the top or in
       ``depth/``, or a folder of them: :func:`read_realsensors`), groups the folder names.
 

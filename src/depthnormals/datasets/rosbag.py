@@ -1,6 +1,7 @@
 """Reader of depth images recorded in ROS bags: ROS 1 ``.bag`` files (the RealSense Viewer's
-recordings among them) and ROS 2 bag folders, through the ``rosbags`` library (``pip install
-'depthnormals[ros]'``; pure Python, no ROS installation).
+recordings among them), ROS 2 bag folders and a ROS 2 bag's single ``.mcap`` file (the default
+storage since ROS 2 Iron), through the ``rosbags`` library (``pip install 'depthnormals[ros]'``;
+pure Python, no ROS installation).
 
 A depth topic is one of ``sensor_msgs/Image`` whose messages are ``16UC1`` / ``mono16``
 (millimetres, REP 118) or ``32FC1`` (metres), or of ``sensor_msgs/CompressedImage`` in
@@ -39,6 +40,7 @@ DEPTH_ENCODINGS = {"16UC1": 0.001, "mono16": 0.001, "32FC1": 1.0}
 #: Distortion models that :func:`depthnormals.undistort_depth` undoes (OpenCV's).
 OPENCV_MODELS = ("plumb_bob", "rational_polynomial", "brown conrady", "brown_conrady")
 _ROS1_MAGIC = b"#ROSBAG V2.0\n"
+_MCAP_MAGIC = b"\x89MCAP0\r\n"
 _PNG = b"\x89PNG\r\n\x1a\n"
 _IMAGE = "sensor_msgs/msg/Image"
 _COMPRESSED = "sensor_msgs/msg/CompressedImage"
@@ -49,12 +51,14 @@ def _anyreader() -> Any:
 
 
 def is_rosbag(path: str | Path) -> bool:
-    """True for a ROS 1 bag file (``#ROSBAG V2.0`` header) or a ROS 2 bag folder
-    (``metadata.yaml`` beside ``.db3`` / ``.mcap`` storage)."""
+    """True for a ROS 1 bag file (``#ROSBAG V2.0`` header), a ROS 2 bag folder
+    (``metadata.yaml`` beside ``.db3`` / ``.mcap`` storage) or an ``.mcap`` file (its magic:
+    a ROS 2 bag's storage on its own; ``rosbags`` opens it by that suffix)."""
     p = Path(path)
     if p.is_file():
         with p.open("rb") as fh:
-            return fh.read(len(_ROS1_MAGIC)) == _ROS1_MAGIC
+            head = fh.read(len(_ROS1_MAGIC))
+        return head == _ROS1_MAGIC or (p.suffix == ".mcap" and head.startswith(_MCAP_MAGIC))
     return (p.is_dir() and (p / "metadata.yaml").is_file()
             and any(q.suffix in (".db3", ".mcap") for q in p.iterdir()))
 
@@ -170,7 +174,7 @@ def _camera(msg: Any, where: str) -> tuple[Intrinsics, tuple[float, ...], str, t
 
 def read_rosbag(path: str | Path, *, topic: str | None = None, intrinsics: Any = None,
                 depth_scale: float | None = None, undistort: bool = True) -> Iterator[Frame]:
-    """Yield the depth frames of a ROS bag (ROS 1 ``.bag`` file or ROS 2 bag folder).
+    """Yield the depth frames of a ROS bag (ROS 1 ``.bag`` file, ROS 2 bag folder or ``.mcap``).
 
     Parameters
     ----------
