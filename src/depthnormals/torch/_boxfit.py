@@ -30,7 +30,7 @@ from ..ddm.auto import _slopes as _auto_slopes
 from ..ddm.boxfit import LOCAL_CAP, MIN_POINTS, SHIFTS
 from ..ddm.support import DEVIATION, FALLBACK_RADIUS
 from ..kernels.eig3 import sym3_adjugate_apply
-from ._common import shifted_views, stack_width
+from ._common import first_least, shifted_views, stack_width
 
 __all__ = ["Fits", "box_fits", "choose_least", "choose_local", "choose_plain", "keep_estimator",
            "upsample_half"]
@@ -176,12 +176,11 @@ def _take(shape, dvs: torch.Tensor, dus: torch.Tensor, *qs: torch.Tensor) -> lis
     return [torch.gather(q.reshape(bsz, -1), 1, src).reshape(shape) for q in qs]
 
 
-def _least_shifted(s0: torch.Tensor, shift: int, shifts) -> tuple[torch.Tensor, torch.Tensor]:
-    """The least of ``s0`` read at the offsets ``shifts`` (times ``shift``; inf outside the
-    image, NaN read as inf) and the index of the first that holds it: the running ``sk <
-    best`` of the numba kernels over the windows in order, in a few kernel launches."""
-    sk = torch.stack(shifted_views(s0, [(shift * dv, shift * du) for dv, du in shifts], float("inf")))
-    return torch.where(sk == sk, sk, float("inf")).min(0)
+def _shifted(s0: torch.Tensor, shift: int, shifts) -> torch.Tensor:
+    """``s0`` read at each of the offsets ``shifts`` (times ``shift``; inf outside the image),
+    stacked (K, B, H, W): the candidates of the numba kernels' running ``sk < best`` over the
+    windows in order (:func:`._common.first_least`)."""
+    return torch.stack(shifted_views(s0, [(shift * dv, shift * du) for dv, du in shifts], float("inf")))
 
 
 def _plane_normal(a, b, c, dvs, dus, cam):
@@ -268,10 +267,8 @@ def choose_plain(valid, fits: Fits, big: Fits | None, shift: int, gate: float, b
         best = s0 * self_weight
         kbest = torch.zeros(s0.shape, dtype=torch.long, device=s0.device)
         search = ~(s0 <= gate)
-        least, k = _least_shifted(s0, shift, _SHIFTS[1:])
-        take = search & (least < best)
-        best = torch.where(take, least, best)
-        kbest = torch.where(take, k + 1, kbest)
+        cand = torch.where(search, _shifted(s0, shift, _SHIFTS[1:]), float("inf"))
+        best, kbest = first_least(cand, best, kbest, 1)
         found = best < float("inf")
         take_big = valid & (big.score <= big_gate) if big is not None else torch.zeros_like(valid)
     return _chosen(fits, big, kbest, found, take_big, valid, shift, cam)
@@ -301,7 +298,9 @@ def _fallback(n, dev, zreal, vreal, cam):
     score = small.score
     zero = torch.zeros_like(score, dtype=torch.long)
     fx_, fy_, fz_ = _plane_normal(small.a, small.b, small.c, zero, zero, cam)
-    best, k = _least_shifted(score, rs, _SHIFTS)  # in order: the first of equal scores wins
+    # in order: the first of equal scores wins
+    best, k = first_least(_shifted(score, rs, _SHIFTS), torch.full_like(score, float("inf")),
+                          torch.zeros(score.shape, dtype=torch.long, device=score.device), 0)
     found = best < float("inf")
     d = torch.tensor(_SHIFTS, dtype=torch.long, device=k.device) * rs
     bx, by, bz = (torch.where(found, q, 0.0) for q in _take(k.shape, d[k, 0], d[k, 1], fx_, fy_, fz_))
@@ -340,10 +339,8 @@ def choose_least(zs, valid, fits: Fits, big: Fits | None, shift: int, gate: torc
         g0 = gate.float() * fac
         s0 = fits.score.float()
         best = torch.where(s0 <= g0, torch.full_like(s0, -1.0), s0)
-        least, k = _least_shifted(s0, shift, _SHIFTS[1:])
-        take = least < best
-        best = torch.where(take, least, best)
-        kbest = torch.where(take, k + 1, 0)
+        best, kbest = first_least(_shifted(s0, shift, _SHIFTS[1:]), best,
+                                  torch.zeros(s0.shape, dtype=torch.long, device=s0.device), 1)
         found = best < float("inf")
         if big is not None:
             bs = big.score.float().repeat_interleave(big_scale, -2).repeat_interleave(big_scale, -1)

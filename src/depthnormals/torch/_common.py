@@ -22,8 +22,8 @@ import torch.nn.functional as F
 from ..camera import Intrinsics, as_intrinsics
 from ..kernels.orient import TIE_COS2
 
-__all__ = ["STACK_ELEMENTS", "STACK_ON_CPU", "Camera", "Grid", "camera", "finish", "oriented", "prepare",
-           "shift", "shifted_views", "stack_width"]
+__all__ = ["STACK_ELEMENTS", "STACK_ON_CPU", "Camera", "Grid", "camera", "finish", "first_least",
+           "oriented", "prepare", "shift", "shifted_views", "stack_width"]
 
 
 @dataclass(frozen=True)
@@ -175,6 +175,18 @@ def stack_width(x: torch.Tensor, n: int) -> int:
     if x.device.type == "cpu" and not STACK_ON_CPU:
         return 1
     return max(1, min(n, STACK_ELEMENTS // max(1, x.numel())))
+
+
+def first_least(values: torch.Tensor, least: torch.Tensor, index: torch.Tensor,
+                start: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """One chunk of a running minimum over candidates in order, as a loop ``if v < least:
+    least, index = v, k`` takes it: ``values`` (K, ...) the chunk's candidates ``start ..
+    start + K - 1`` (NaN never taken), ``least`` and ``index`` the minimum and its candidate
+    so far. The first of equal values wins, within the chunk (``torch.min``'s first index)
+    and across chunks (a strict ``<``). Returns the new ``(least, index)``."""
+    v, k = torch.where(values == values, values, math.inf).min(0)
+    take = v < least
+    return torch.where(take, v, least), torch.where(take, k + start, index)
 
 
 def shift(x: torch.Tensor, dv: int, du: int, fill: float | bool) -> torch.Tensor:

@@ -15,8 +15,8 @@ import math
 import torch
 
 from ..ddm.faceswitch import ANGLE, DIRECTIONS, JUMP, MARGIN
+from ._common import first_least, shifted_views, stack_width
 from ._common import shift as _at
-from ._common import shifted_views, stack_width
 
 __all__ = ["switch_faces"]
 
@@ -86,8 +86,8 @@ def switch_faces(z: torch.Tensor, n: tuple, cam, span: int) -> tuple:
         other, same = inf, distance(nf, s)
         best = torch.full(z.shape, -1, dtype=torch.long, device=dev)
         # the directions in chunks (:func:`._common.stack_width`: all eight at once on a GPU,
-        # one by one on the CPU); the first least distance wins, as the numba kernel's loop
-        # over the directions takes it
+        # one by one on the CPU); the first least distance wins (:func:`._common.first_least`),
+        # as the numba kernel's loop over the directions takes it
         offsets = [(span * dv, span * du) for dv, du in _DIRECTIONS]
         nfs = shifted_views(torch.stack(nf), offsets, math.nan)
         ss = shifted_views(s[:4], offsets, 0.0)
@@ -99,10 +99,7 @@ def switch_faces(z: torch.Tensor, n: tuple, cam, span: int) -> tuple:
             dot = torch.where(dot == dot, dot, torch.full_like(dot, 2.0))
             m = distance(qn, qs)
             is_other = dot < cm
-            mo, ko = torch.where(is_other & (m < math.inf), m, math.inf).min(0)
-            take = mo < other
-            other = torch.where(take, mo, other)
-            best = torch.where(take, ko + k0, best)
+            other, best = first_least(torch.where(is_other, m, math.inf), other, best, k0)
             own = torch.where(~is_other & (dot <= 1.5) & (m == m), m, math.inf).amin(0)
             same = torch.where(own < same, own, same)
         switch = smooth & (best >= 0) & (other < MARGIN * same)
