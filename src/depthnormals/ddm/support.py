@@ -441,7 +441,7 @@ def _median_of(x, ok, buf):
     return hi if k % 2 == 1 else (lo + hi) / 2
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy")
 def _radius_stats_rows(rows, ok):
     """:func:`_radius_stats` before the error's factor: per frame the number of pairs, the
     median angle and the median residual of the kept pairs, and the kept pairs."""

@@ -1095,7 +1095,7 @@ def _offset_scales(zg, ng, offsets, zref: float, half: int) -> np.ndarray:
                                DEPTH_QUANTILE) for i in range(len(DEPTH_SPANS))])
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy")
 def _scale_of(o, z, nx, st, izref, half, q):
     """The ``q`` th percentile of ``o / sqrt(growth)`` (:func:`_root_growth`) over every ``st``-th
     row and column of ``o`` (H, W) where ``nx`` (a normal's component) is valid and ``o``
@@ -1687,7 +1687,7 @@ def normals_with_uncertainty(compute, depth: Any, K: Any, *, method: str,
     return normals, unc
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy")
 def _fill_gaps(normals, unc):
     """``unc = MAX_ERROR`` (no information) where it is NaN but the normal is not: the map's
     own arithmetic failed (depths near the dtype's limits, 1e300 beside 1; found by a fuzz,
