@@ -8,8 +8,9 @@
    ``tests/data``'s time-of-flight and active-stereo frames), batched by size: mean and 99.9th
    percentile of the angle between the normals (limits 0.01 / 0.1 deg), NaN patterns, the
    map's largest relative difference (limit 1e-3).
-2. ``depthnormals.torch.undistort_depth`` against ``depthnormals.undistort_depth`` on the
-   Azure Kinect frame's stored grid and lens: equal to the bit.
+2. The stacked neighbour loops of an accelerator (``_common.stack_width``) against one at a
+   time, and ``depthnormals.torch.undistort_depth`` against ``depthnormals.undistort_depth``
+   on the Azure Kinect frame's stored grid and lens: each equal to the bit.
 3. The time of a batch of 8 640x480 kinect_v1 frames, with and without the map, beside the
    numba library's per frame on the same machine.
 
@@ -37,6 +38,7 @@ import depthnormals.torch as dt
 from depthnormals.analytic import make_scene
 from depthnormals.datasets.realsensors import read_realsensors
 from depthnormals.synth.noise import _rays as unit_rays
+from depthnormals.torch import _common
 from test_torch_default_parity import FRAMES, K_SMALL, MODELS
 
 parser = argparse.ArgumentParser(description=__doc__,
@@ -104,6 +106,20 @@ for shape, g in by.items():
         ok &= check([f.depth.astype(dtype) for f in g], [f.K for f in g],
                     f"real {shape} {np.dtype(dtype).name}", worst)
 print("worst", worst, flush=True)
+
+# the stacked neighbour loops (as this device runs them) against one at a time: the same bits
+z = torch.from_numpy(np.stack([z for label, z in FRAMES if "clean" not in label]))[:, None].to(dev)
+stacked = dt.estimate_normals(z, K_SMALL, backend="torch")
+saved = _common.STACK_ELEMENTS
+_common.STACK_ELEMENTS = 1
+try:
+    single = dt.estimate_normals(z, K_SMALL, backend="torch")
+finally:
+    _common.STACK_ELEMENTS = saved
+same = torch.equal(torch.nan_to_num(stacked), torch.nan_to_num(single))
+print(f"stacked neighbour loops against one at a time: {'OK, equal to the bit' if same else 'FAIL'}",
+      flush=True)
+ok &= same
 
 azure = Path(__file__).resolve().parents[1] / "tests/data/azure_kinect_tof"
 dist = json.loads((azure / "intrinsics.json").read_text())["distortion"]
