@@ -30,7 +30,7 @@ from ..ddm.auto import _slopes as _auto_slopes
 from ..ddm.boxfit import LOCAL_CAP, MIN_POINTS, SHIFTS
 from ..ddm.support import DEVIATION, FALLBACK_RADIUS
 from ..kernels.eig3 import sym3_adjugate_apply
-from ._common import first_least, shifted_views, stack_width
+from ._common import first_least, shifted_views, stack_width, take_at
 
 __all__ = ["Fits", "box_fits", "choose_least", "choose_local", "choose_plain", "keep_estimator",
            "upsample_half"]
@@ -162,18 +162,8 @@ def _gather_plane(f: Fits, k: torch.Tensor, shift: int):
     pixel; every chooser picks only windows inside the image (those outside score inf)."""
     d = torch.tensor(_SHIFTS, dtype=torch.long, device=k.device) * shift
     dvs, dus = d[k, 0], d[k, 1]
-    a, b, c = _take(k.shape, dvs, dus, f.a, f.b, f.c)
+    a, b, c = take_at(dvs, dus, f.a, f.b, f.c)
     return a, b, c, dvs, dus
-
-
-def _take(shape, dvs: torch.Tensor, dus: torch.Tensor, *qs: torch.Tensor) -> list[torch.Tensor]:
-    """Each of ``qs`` (B, H, W) read at every pixel's offset (``dvs``, ``dus``) (clamped into
-    the image): a gather, so a gradient reaches the value read (as a shifted copy's would)."""
-    bsz, h, w = shape
-    v = (torch.arange(h, device=dvs.device).reshape(1, h, 1) + dvs).clamp(0, h - 1)
-    u = (torch.arange(w, device=dus.device).reshape(1, 1, w) + dus).clamp(0, w - 1)
-    src = (v * w + u).reshape(bsz, -1)
-    return [torch.gather(q.reshape(bsz, -1), 1, src).reshape(shape) for q in qs]
 
 
 def _shifted(s0: torch.Tensor, shift: int, shifts) -> torch.Tensor:
@@ -303,7 +293,7 @@ def _fallback(n, dev, zreal, vreal, cam):
                           torch.zeros(score.shape, dtype=torch.long, device=score.device), 0)
     found = best < float("inf")
     d = torch.tensor(_SHIFTS, dtype=torch.long, device=k.device) * rs
-    bx, by, bz = (torch.where(found, q, 0.0) for q in _take(k.shape, d[k, 0], d[k, 1], fx_, fy_, fz_))
+    bx, by, bz = (torch.where(found, q, 0.0) for q in take_at(d[k, 0], d[k, 1], fx_, fy_, fz_))
     use = flag & found
     fb = _ray_facing(bx, by, bz, cam, use)
     return (*tuple(torch.where(use, q, p) for p, q in zip(n[:3], fb[:3], strict=True)), n[3])

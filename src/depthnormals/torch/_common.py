@@ -23,7 +23,7 @@ from ..camera import Intrinsics, as_intrinsics
 from ..kernels.orient import TIE_COS2
 
 __all__ = ["STACK_ELEMENTS", "STACK_ON_CPU", "Camera", "Grid", "camera", "finish", "first_least",
-           "oriented", "prepare", "shift", "shifted_views", "stack_width"]
+           "oriented", "prepare", "shift", "shifted_views", "stack_width", "take_at"]
 
 
 @dataclass(frozen=True)
@@ -187,6 +187,17 @@ def first_least(values: torch.Tensor, least: torch.Tensor, index: torch.Tensor,
     v, k = torch.where(values == values, values, math.inf).min(0)
     take = v < least
     return torch.where(take, v, least), torch.where(take, k + start, index)
+
+
+def take_at(dvs: torch.Tensor, dus: torch.Tensor, *qs: torch.Tensor) -> list[torch.Tensor]:
+    """Each of ``qs`` (B, H, W) read at every pixel's own offset (``dvs``, ``dus``, (B, H, W)
+    integers; clamped into the image): a gather, so a gradient reaches the value read (as a
+    shifted copy's would)."""
+    bsz, h, w = dvs.shape
+    v = (torch.arange(h, device=dvs.device).reshape(1, h, 1) + dvs).clamp(0, h - 1)
+    u = (torch.arange(w, device=dus.device).reshape(1, 1, w) + dus).clamp(0, w - 1)
+    src = (v * w + u).reshape(bsz, -1)
+    return [torch.gather(q.reshape(bsz, -1), 1, src).reshape(dvs.shape) for q in qs]
 
 
 def shift(x: torch.Tensor, dv: int, du: int, fill: float | bool) -> torch.Tensor:

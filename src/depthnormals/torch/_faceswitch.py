@@ -15,7 +15,7 @@ import math
 import torch
 
 from ..ddm.faceswitch import ANGLE, DIRECTIONS, JUMP, MARGIN
-from ._common import first_least, shifted_views, stack_width
+from ._common import first_least, shifted_views, stack_width, take_at
 from ._common import shift as _at
 
 __all__ = ["switch_faces"]
@@ -109,9 +109,5 @@ def switch_faces(z: torch.Tensor, n: tuple, cam, span: int) -> tuple:
     # has no normal, so it is no other face)
     dirs = torch.tensor(_DIRECTIONS, dtype=torch.long, device=dev) * span
     k = best.clamp(min=0)
-    vv = torch.arange(h, device=dev).reshape(1, h, 1) + dirs[k, 0]
-    uu = torch.arange(w, device=dev).reshape(1, 1, w) + dirs[k, 1]
-    src = torch.where(switch, vv.clamp(0, h - 1) * w + uu.clamp(0, w - 1),
-                      torch.arange(h * w, device=dev).reshape(1, h, w)).reshape(z.shape[0], -1)
-    out = [torch.gather(q.reshape(z.shape[0], -1), 1, src).reshape(z.shape) for q in (nx, ny, nz)]
+    out = take_at(torch.where(switch, dirs[k, 0], 0), torch.where(switch, dirs[k, 1], 0), nx, ny, nz)
     return (*out, ok), switch
