@@ -74,7 +74,11 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
   switch (:mod:`depthnormals.ddm.faceswitch`) examined the pixel's cell, at least the angle
   between the two faces times the chance of the wrong one, read from how clearly one face's
   fit won (:data:`DECIDED_MAP`, :func:`_decided_cells`), and last every value compressed as
-  ``x / (1 + x / SATURATION)``;
+  ``x / (1 + x / SATURATION)``; (session 37) the product adds in quadrature
+  :data:`~depthnormals.ddm.bend.BEND_SHARE` of how far the surface bends over tens of
+  pixels (:mod:`depthnormals.ddm.bend`: mean normals 48 px apart on one near-plane, read on
+  the choice): real depth bends its planes at that scale (a sensor's low-frequency
+  distortion, multipath) and the normals follow it;
 - **clean depth** (the plane hypotheses): the float rounding of the one-pixel stencils
   (``sigma / sqrt(6)``) plus, where the pixel's normal agrees with none of its four neighbours'
   (a facet narrower than two pixels: no one-sided stencil fits), the least angle between them.
@@ -108,6 +112,8 @@ from .auto import (
     needs_measured_support,
     plane_select,
 )
+from .bend import BEND_SHARE, bend_grid, bend_row, bend_term
+from .bend import STEP as BEND_STEP
 from .boxfit import box_fit_from_prepared, box_fit_windows
 from .flying import JUMP_REL, mixed_share
 from .noise import TILE, noise_pass
@@ -583,7 +589,7 @@ def _interior_error(normals, z, score, prof: SupportProfile) -> float:
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _support_rows(v0, v1, z, normals, model, ctx, out):
+def _support_rows(v0, v1, z, normals, model, ctx, bend, out):
     """Rows ``[v0, v1)`` of the measured support's map (degrees) into ``out`` (H, W).
 
     ``model = (e_i, zref, half)``: the interior error ``e_i`` (degrees at ``zref``), growing
@@ -595,8 +601,9 @@ def _support_rows(v0, v1, z, normals, model, ctx, out):
     constant of another module). Per
     pixel the product of powers of :data:`SUPPORT_MAP` and :data:`SUPPORT_POW` (module doc),
     at least :data:`LEVEL_FLOOR` ``lev``, plus the ramp :data:`DEPTH_RAMP` of the offsets,
-    times :data:`FALLBACK_SCALE` where the pixel fell back, at most :data:`MAX_ERROR`; NaN where
-    the normal is NaN.
+    times :data:`FALLBACK_SCALE` where the pixel fell back, then the bend term in quadrature
+    (``bend``: :func:`depthnormals.ddm.bend.bend_term` on this grid), at most
+    :data:`MAX_ERROR`; NaN where the normal is NaN.
     Every loop runs along a row."""
     e_i, zref, half = model
     s1, far, sub, sh, offs, inv_q, dev, limit = ctx
@@ -619,6 +626,8 @@ def _support_rows(v0, v1, z, normals, model, ctx, out):
     q0 = f32(inv_q[0])
     q1 = f32(inv_q[1])
     f2 = np.empty((2, w), dtype=f32)  # the row's densities from the half grid
+    b2 = np.empty(w, dtype=f32)  # the row's squared bend term
+    sq = np.empty(bend[0].shape[1], dtype=f32)  # (its cells')
     lev = np.empty(w, dtype=f32)
     grow = np.empty(w, dtype=f32)
     fsc = f32(FALLBACK_SCALE)
@@ -659,6 +668,9 @@ def _support_rows(v0, v1, z, normals, model, ctx, out):
             full = full if full < f32(1.0) else f32(1.0)
             m = m + ra * t * t * full
             lev[u] = m * fsc if dv_row[u] > dlim else m
+        bend_row(bend, v, sq, b2)
+        for u in range(w):  # (apart from the strided loop below: vectorised)
+            lev[u] = np.sqrt(lev[u] * lev[u] + b2[u])
         for u in range(w):
             nx = normals[v, u, 0]
             m = cap if lev[u] > cap else lev[u]
@@ -1333,7 +1345,13 @@ def _support_branch(z, cam, sigma, prof):
         zg, cam_g, big_g, rows = z, cam, big, 16
     ctx = (*_context(zg, chosen, big_g, cam_g, growth=model[1:]), dev, limit)
     grid = np.empty(zg.shape, dtype=np.float32)  # (a half-grid cell of invalid depth: e_i)
-    run_rows(_support_rows, zg.shape[0], zg, chosen, model, ctx, grid, min_rows=rows)
+    # with the product, how far the surface bends over tens of pixels (a sensor's own
+    # deformation of a plane, which the normals follow; ddm/bend.py) in quadrature
+    # (read on the choice before the fallback, on the map's grid, as the spreads are: BEND_STEP
+    # pixels is BEND_STEP / 2 cells of the half grid)
+    gs = BEND_STEP // 2 if halved else BEND_STEP
+    bend = bend_term(bend_grid(chosen, zg, cam_g, step=gs), gs, BEND_SHARE, zg.shape[1])
+    run_rows(_support_rows, zg.shape[0], zg, chosen, model, ctx, bend, grid, min_rows=rows)
     # last, the crease floor of the edges between two cells that fell back (output normals)
     a, far, theta = CREASE_FLOOR
     edges = np.empty((2, *zg.shape), dtype=np.float32)
