@@ -161,15 +161,15 @@ def test_the_measured_support_map_adds_the_bend(monkeypatch):
     d = np.asarray(kinect_v1_noise(z, n, CAM, rng=np.random.default_rng(0)), np.float32)
     assert dn.noise_profile(d, CAM).branch == "measured-support"
     seen = {}
-    orig = uncertainty.bend_grid
+    orig = uncertainty.bend_grid_by_rows
 
     def spy(*a, **k):
         seen["grid"] = orig(*a, **k)
         return seen["grid"]
 
-    monkeypatch.setattr(uncertainty, "bend_grid", spy)
+    monkeypatch.setattr(uncertainty, "bend_grid_by_rows", spy)
     n1, u1 = dn.estimate_normals(d, CAM, return_uncertainty=True)
-    monkeypatch.setattr(uncertainty, "bend_grid", lambda *a, **k: np.zeros((1, 1)))
+    monkeypatch.setattr(uncertainty, "bend_grid_by_rows", lambda *a, **k: np.zeros((1, 1)))
     n0, u0 = dn.estimate_normals(d, CAM, return_uncertainty=True)
     assert np.array_equal(n0, n1, equal_nan=True)
     g = seen["grid"]

@@ -32,7 +32,8 @@ import math
 import numba as nb
 import numpy as np
 
-__all__ = ["BEND_SHARE", "BOX", "GATE_DEG", "SPAN", "STEP", "bend_grid", "bend_row", "bend_term"]
+__all__ = ["BEND_SHARE", "BOX", "GATE_DEG", "SPAN", "STEP", "bend_grid", "bend_grid_by_rows",
+           "bend_row", "bend_term"]
 
 #: Grid spacing (pixels) of the cells.
 STEP = 8
@@ -52,8 +53,9 @@ BEND_SHARE = 0.6
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _cells(normals, z, step, cam, out_n, out_x):
-    """The sampled normals and points of the cells (NaN where invalid)."""
+def _cells(planar, z, step, cam, out_n, out_x):
+    """The sampled normals (``planar`` (H, 3, W), by row) and points of the cells (NaN where
+    invalid)."""
     fx, fy, cx, cy = cam
     hc, wc = out_x.shape[:2]
     for i in range(hc):
@@ -61,10 +63,10 @@ def _cells(normals, z, step, cam, out_n, out_x):
         for j in range(wc):
             u = j * step
             zz = z[v, u]
-            n0 = normals[v, u, 0]
+            n0 = planar[v, 0, u]
             ok = zz == zz and n0 == n0
             for k in range(3):
-                out_n[i, j, k] = normals[v, u, k] if ok else 0.0
+                out_n[i, j, k] = planar[v, k, u] if ok else 0.0
             if ok:
                 out_x[i, j, 0] = (u - cx) / fx * zz
                 out_x[i, j, 1] = (v - cy) / fy * zz
@@ -163,19 +165,27 @@ def bend_grid(normals: np.ndarray, z: np.ndarray, cam: tuple, *, step: int = STE
 
     ``normals`` (H, W, 3) unit (NaN invalid), ``z`` (H, W) planar depth (NaN invalid),
     ``cam`` ``(fx, fy, cx, cy)`` in pixels."""
+    planar = np.ascontiguousarray(np.asarray(normals, dtype=np.float32).transpose(0, 2, 1))
+    return bend_grid_by_rows(planar, z, cam, step=step, box=box, span=span, gate_deg=gate_deg)
+
+
+def bend_grid_by_rows(planar: np.ndarray, z: np.ndarray, cam: tuple, *, step: int = STEP,
+                      box: int = BOX, span: int = SPAN, gate_deg: float = GATE_DEG) -> np.ndarray:
+    """:func:`bend_grid` of normals laid out by row, ``planar`` (H, 3, W) float32 C-contiguous
+    (the uncertainty map's layout: no copy)."""
     fx, fy, cx, cy = (float(c) for c in cam)
-    return _bend_grid(normals, z, step, (fx, fy, cx, cy), box, RESULTANT, span,
+    return _bend_grid(planar, z, step, (fx, fy, cx, cy), box, RESULTANT, span,
                       math.sin(math.radians(gate_deg)))
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _bend_grid(normals, z, step, cam, box, resultant, span, gate):
-    """:func:`bend_grid` in one compiled call (one dispatch)."""
+def _bend_grid(planar, z, step, cam, box, resultant, span, gate):
+    """:func:`bend_grid_by_rows` in one compiled call (one dispatch)."""
     h, w = z.shape
     hc, wc = -(-h // step), -(-w // step)
     cn = np.empty((hc, wc, 3))
     cx = np.empty((hc, wc, 3))
-    _cells(normals, z, step, cam, cn, cx)
+    _cells(planar, z, step, cam, cn, cx)
     mn = np.empty((hc, wc, 3))
     _box_means(cn, cx, box, resultant, mn)
     out = np.empty((hc, wc))

@@ -112,7 +112,7 @@ from .auto import (
     needs_measured_support,
     plane_select,
 )
-from .bend import BEND_SHARE, bend_grid, bend_row, bend_term
+from .bend import BEND_SHARE, bend_grid_by_rows, bend_row, bend_term
 from .bend import STEP as BEND_STEP
 from .boxfit import box_fit_from_prepared, box_fit_windows
 from .flying import JUMP_REL, mixed_share
@@ -1075,9 +1075,19 @@ def _box_row(ii, v, r, lo, hi, inv, out):
         out[u] = (rb[d] - ra[d] - rb[c] + ra[c]) * (iv * inv[u])
 
 
-def _context(zg, ng, big: int, cam: tuple, shift: int = 1, *, growth: tuple) -> tuple:
+def _by_row(ng) -> np.ndarray:
+    """The normals ``ng`` (H, W, 3) laid out by row, (H, 3, W) float32 (:func:`_by_rows`; 2x
+    numpy's strided transpose)."""
+    h = ng.shape[0]
+    planar = np.empty((h, 3, ng.shape[1]), dtype=np.float32)
+    run_rows(_by_rows, h, np.ascontiguousarray(ng, dtype=np.float32), planar, min_rows=16)
+    return planar
+
+
+def _context(zg, ng, planar, big: int, cam: tuple, shift: int = 1, *, growth: tuple) -> tuple:
     """What the measured support's map reads besides its level, on the grid of its choice
-    (depth ``zg``, NaN where invalid, normals ``ng``, camera ``cam`` of that grid): the mean
+    (depth ``zg``, NaN where invalid, normals ``ng`` and the same by row ``planar``
+    (:func:`_by_row`), camera ``cam`` of that grid): the mean
     angle of the normals :data:`NEAR_SPAN` away (H, W) and ``big`` away (1, H, W), each to
     the right, left, below and above (:func:`_spreads_rows`), :func:`_densities` on every
     ``2^shift``-th row and column of that grid, and how far the pixels' planes miss their
@@ -1085,8 +1095,6 @@ def _context(zg, ng, big: int, cam: tuple, shift: int = 1, *, growth: tuple) -> 
     of their frame scales (:func:`_offset_scales`; ``growth = (zref, half)`` as in
     :func:`_support_rows`)."""
     h, w = zg.shape
-    planar = np.empty((h, 3, w), dtype=np.float32)  # by row (2x numpy's strided transpose)
-    run_rows(_by_rows, h, np.ascontiguousarray(ng, dtype=np.float32), planar, min_rows=16)
     spreads = np.empty((2, h, w), dtype=np.float32)
     run_rows(_spreads_rows, h, planar, NEAR_SPAN, max(1, big), spreads, min_rows=16)
     offsets = np.empty((len(DEPTH_SPANS), h, w), dtype=np.float32)
@@ -1343,14 +1351,15 @@ def _support_branch(z, cam, sigma, prof):
         cam_g, big_g, rows = (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy), big // 2, 8
     else:
         zg, cam_g, big_g, rows = z, cam, big, 16
-    ctx = (*_context(zg, chosen, big_g, cam_g, growth=model[1:]), dev, limit)
+    planar = _by_row(chosen)
+    ctx = (*_context(zg, chosen, planar, big_g, cam_g, growth=model[1:]), dev, limit)
     grid = np.empty(zg.shape, dtype=np.float32)  # (a half-grid cell of invalid depth: e_i)
     # with the product, how far the surface bends over tens of pixels (a sensor's own
     # deformation of a plane, which the normals follow; ddm/bend.py) in quadrature
     # (read on the choice before the fallback, on the map's grid, as the spreads are: BEND_STEP
     # pixels is BEND_STEP / 2 cells of the half grid)
     gs = BEND_STEP // 2 if halved else BEND_STEP
-    bend = bend_term(bend_grid(chosen, zg, cam_g, step=gs), gs, BEND_SHARE, zg.shape[1])
+    bend = bend_term(bend_grid_by_rows(planar, zg, cam_g, step=gs), gs, BEND_SHARE, zg.shape[1])
     run_rows(_support_rows, zg.shape[0], zg, chosen, model, ctx, bend, grid, min_rows=rows)
     # last, the crease floor of the edges between two cells that fell back (output normals)
     a, far, theta = CREASE_FLOOR
