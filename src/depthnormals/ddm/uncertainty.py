@@ -74,10 +74,10 @@ The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncert
   switch (:mod:`depthnormals.ddm.faceswitch`) examined the pixel's cell, at least the angle
   between the two faces times the chance of the wrong one, read from how clearly one face's
   fit won (:data:`DECIDED_MAP`, :func:`_decided_cells`), and last every value compressed as
-  ``x / (1 + x / SATURATION)``; (session 37) the product adds in quadrature
-  :data:`~depthnormals.ddm.bend.BEND_SHARE` of how far the surface bends over tens of
-  pixels (:mod:`depthnormals.ddm.bend`: mean normals 48 px apart on one near-plane, read on
-  the choice): real depth bends its planes at that scale (a sensor's low-frequency
+  ``x / (1 + x / SATURATION)``; before those floors (session 37) the product adds in
+  quadrature :data:`~depthnormals.ddm.bend.BEND_SHARE` of how far the surface bends over
+  tens of pixels (:mod:`depthnormals.ddm.bend`: mean normals 48 px apart on one near-plane,
+  read on the choice): real depth bends its planes at that scale (a sensor's low-frequency
   distortion, multipath) and the normals follow it;
 - **clean depth** (the plane hypotheses): the float rounding of the one-pixel stencils
   (``sigma / sqrt(6)``) plus, where the pixel's normal agrees with none of its four neighbours'
