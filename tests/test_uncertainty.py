@@ -15,8 +15,13 @@ import depthnormals as dn
 from depthnormals.analytic import tilted_plane
 from depthnormals.ddm.uncertainty import UNCERTAINTY_METHODS
 
-#: No bend term in the measured support's product (`_support_rows`; :mod:`depthnormals.ddm.bend`).
-_NO_BEND = (np.zeros((1, 1)), 8, 0.0, np.zeros(4096, np.int64))
+
+def _no_bend(w: int) -> tuple:
+    """No bend term in the measured support's product (``_support_rows``) on ``w`` columns
+    (:func:`depthnormals.ddm.bend.bend_term` of a grid of zeros)."""
+    from depthnormals.ddm.bend import bend_term
+
+    return bend_term(np.zeros((1, 1)), 8, 0.0, w)
 
 
 def _plane(noise: float, seed: int = 0, shape=(120, 160)):
@@ -593,7 +598,7 @@ def test_support_map_adds_the_depth_ramp():
         s1 = np.full((1, w), spreads[0], np.float32)
         far = np.full((1, 1, w), spreads[1], np.float32)
         zero = np.zeros((1, w), np.float32)
-        U._support_rows(0, 1, z, n, model, (s1, far, sub, 0, offs, inv_q, zero, 5.0), _NO_BEND,
+        U._support_rows(0, 1, z, n, model, (s1, far, sub, 0, offs, inv_q, zero, 5.0), _no_bend(w),
                         out)
         return out[0]
 
@@ -634,7 +639,7 @@ def test_support_map_reads_the_fallback():
         s1 = np.full((1, w), 2.0, np.float32)
         far = np.full((1, 1, w), 3.0, np.float32)
         U._support_rows(0, 1, z, n, (1.0, 2.0, 0), (s1, far, sub, 0, offs, (1.0, 1.0),
-                                                     np.float32([dev]), DEVIATION), _NO_BEND, out)
+                                                     np.float32([dev]), DEVIATION), _no_bend(w), out)
         return out[0]
 
     m = run([0.0] * w)

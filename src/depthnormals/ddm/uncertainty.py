@@ -112,7 +112,7 @@ from .auto import (
     needs_measured_support,
     plane_select,
 )
-from .bend import BEND_SHARE, bend_grid_by_rows, bend_row, bend_term
+from .bend import BEND_SHARE, bend_grid_by_rows, bend_row, bend_term, chord_angle
 from .bend import STEP as BEND_STEP
 from .boxfit import box_fit_from_prepared, box_fit_windows
 from .flying import JUMP_REL, mixed_share
@@ -562,10 +562,7 @@ def _interior_pairs(normals, z, score, gates, span, grid, out):
                 c2 = dx * dx + dy * dy + dz * dz
                 if not (c2 == c2):
                     continue
-                # the angle from the chord (2 asin(k / 2); exact to 1e-6 below 10 deg)
-                c = math.sqrt(c2)
-                ang = c + c * c2 * (1.0 / 24.0 + c2 * (3.0 / 640.0))
-                out[k] = math.degrees(ang) / math.sqrt(0.5 * (fa + fb))
+                out[k] = math.degrees(chord_angle(c2)) / math.sqrt(0.5 * (fa + fb))
                 k += 1
     return k
 
