@@ -202,8 +202,9 @@ def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
     return_uncertainty : bool, default False
         Also return the expected angular error of every normal (degrees, float32 (H, W), NaN
         exactly where the normal is NaN; :mod:`depthnormals.ddm.uncertainty`): for
-        ``"3f2n+"`` (default options, every branch), ``"fals"`` and PCL's four modes; any
-        other method raises ValueError. A stack gives one map per frame, (N, H, W), each
+        ``"3f2n+"`` (default options, every branch), ``"fals"``, PCL's four modes and the
+        box plane fits ``"plane-svd"``, ``"plane-pca"``; any other method raises
+        ValueError. A stack gives one map per frame, (N, H, W), each
         equal to the frame's single call. Calibrated on the procedural synthetic scenes (at 80
         frames a sensor model, every decile within 25 %) and on the real frames' planes; in
         clutter narrower than the estimator's windows (shelves of books) it reads low, by

@@ -68,7 +68,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "format); for other formats it must match the file")
     parser.add_argument("--uncertainty", action="store_true",
                         help="also write the expected angular error (deg, float32) of every normal to "
-                             "<name>.uncertainty.npy beside the output (3f2n+, fals, PCL's modes); "
+                             "<name>.uncertainty.npy beside the output (3f2n+, fals, PCL's modes, "
+                             "plane-svd, plane-pca); "
                              "a .ply output also gets it as the per-point float 'uncertainty'")
     parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                         help="estimator option, e.g. --option kernel=sobel (repeatable; JSON values)")

@@ -12,20 +12,21 @@ standard deviations ``s_x``, ``s_y`` give an angular error whose mean is about
 
 The map follows the branch that produced the normals (docs/3f2n-plus.md, "Uncertainty"):
 
-- **plane fits with a noise level** (the box-fit branch ``box_select``, FALS, PCL's modes): the
-  formula above with the noise of the pixel's 64x64 tile, the window the branch took (the large
-  centred window where it passed its gate, else the small one, the least residual of the nine
-  that hold the pixel standing for the chosen one), inflated by ``sqrt(residual / sigma^2)``
-  where the window's residual variance exceeds the noise (a chi-square test: a window across
-  two surfaces is biased as well as noisy);
-- for the plain fits (FALS, PCL's modes) on noisy depth the map is instead the spread of
-  their own normals one window away (:func:`_far_spread`; the formula stays where no such
-  neighbour is valid), raised by the frame's own measured excess (:func:`_pair_excess`): the
-  median, over pairs of plane-interior pixels :data:`PLAIN_SPAN` apart, of the angle between
-  their normals over the angle the map predicts for the pair; on correlated or quantised
-  depth the i.i.d. form is 2-6x low and ranks the error poorly, on independent noise the
-  factor stays 1 (at most :data:`PLAIN_CAP` degrees where it raises; on clean depth the
-  formula alone);
+- **plane fits with a noise level** (the box-fit branch ``box_select``, FALS, PCL's modes,
+  the box plane fits PlaneSVD and PlanePCA): the formula above with the noise of the pixel's
+  64x64 tile, the window the branch took (the large centred window where it passed its gate,
+  else the small one, the least residual of the nine that hold the pixel standing for the
+  chosen one), inflated by ``sqrt(residual / sigma^2)`` where the window's residual variance
+  exceeds the noise (a chi-square test: a window across two surfaces is biased as well as
+  noisy);
+- for the plain fits (FALS, PCL's modes, PlaneSVD, PlanePCA) on noisy depth the map is
+  instead the spread of their own normals one window away (:func:`_far_spread`; the formula
+  stays where no such neighbour is valid), raised by the frame's own measured excess
+  (:func:`_pair_excess`): the median, over pairs of plane-interior pixels :data:`PLAIN_SPAN`
+  apart, of the angle between their normals over the angle the map predicts for the pair; on
+  correlated or quantised depth the i.i.d. form is 2-6x low and ranks the error poorly, on
+  independent noise the factor stays 1 (at most :data:`PLAIN_CAP` degrees where it raises;
+  on clean depth the formula alone);
 - on the box-fit branch the noise error ``e`` is first scaled by how far the fit error
   measured on the depth exceeds the i.i.d. prediction at the box radius (:func:`_excess_at`, at
   least 1: noise correlated over a pixel or so); the map is then a product of powers (in
@@ -163,6 +164,14 @@ PLAIN_GATE = 2.0
 #: it, it stands). Without it the top decile read 0.34-0.51x (PCL's 3-D gradients, real
 #: frames and kinect_v1: the excess times a residual-inflated edge error); with it 0.73-0.89x.
 PLAIN_CAP = 45.0
+#: Plain fits on noisy depth: the map is at least this share of the frame's measured level at
+#: the pixel (the i.i.d. form of the noise alone, without the window's residual, times its
+#: own measured excess, :func:`_pair_excess`; at most :data:`PLAIN_CAP`). The spread one
+#: window away is a mean of four angles: where it reads low by chance the error is not low
+#: (the real frames' lowest decile read 1.1-1.5x its map for FALS and PCL's modes, 2.4x for
+#: the 3x3 box fits). 0.5 (session 38, synthetic seed 0 and the real frames; docs/benchmarks.md
+#: section 28): no mode lost a decile bin on any column, the real frames 9 -> 10/10 for three.
+PLAIN_FLOOR = 0.5
 #: The median of a Rayleigh distribution per unit of its mean: ``sqrt(2 ln 2) / sqrt(pi / 2)``.
 RAYLEIGH_MEDIAN = math.sqrt(2.0 * math.log(2.0)) / math.sqrt(math.pi / 2.0)
 #: Both noisy maps are products of powers (exponents in eighths, :func:`_root8`) of their
@@ -342,7 +351,7 @@ MAX_ERROR = 90.0
 
 #: Methods whose uncertainty has a closed form (with their window half-size from the options).
 UNCERTAINTY_METHODS = ("3f2n+", "fals", "pcl-average-3d-gradient", "pcl-average-depth-change",
-                       "pcl-covariance-matrix", "pcl-simple-3d-gradient")
+                       "pcl-covariance-matrix", "pcl-simple-3d-gradient", "plane-pca", "plane-svd")
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -1657,16 +1666,18 @@ def _far_spread(normals: np.ndarray, d: int) -> np.ndarray:
 
 
 def _plain(z, cam, normals, r: int):
-    """A plain plane fit over a ``(2 r + 1)^2`` window (FALS, PCL's modes): the normals' own
-    spread one window away (:func:`_far_spread`; the i.i.d. model with the tile noise and the
-    window's own residual where no neighbour that far is valid), times the frame's measured
-    excess (:func:`_pair_excess`: correlated and quantised noise, which the i.i.d. form
-    under-predicts 2-6x), at most :data:`PLAIN_CAP` degrees where the map was below it. On
-    real frames pooled the spread raised the Spearman rank correlation 0.60-0.68 -> 0.78-0.80
-    (docs/benchmarks.md section 17). On clean depth (noise below
-    :data:`~depthnormals.ddm.auto.NOISE_CLEAN`) the i.i.d. model alone: there the spreads and
-    the pairs' angles are the scene's curvature (the factor read 37-355 on the clean synthetic
-    renders)."""
+    """A plain plane fit over a ``(2 r + 1)^2`` window (FALS, PCL's modes, PlaneSVD and
+    PlanePCA, whose centred total least squares errs as the least squares does on a plane):
+    the normals' own spread one window away (:func:`_far_spread`; the i.i.d. model with the
+    tile noise and the window's own residual where no neighbour that far is valid), times
+    the frame's measured excess (:func:`_pair_excess`: correlated and quantised noise, which
+    the i.i.d. form under-predicts 2-6x), at most :data:`PLAIN_CAP` degrees where the map
+    was below it, and at least :data:`PLAIN_FLOOR` of the frame's measured level at the
+    pixel. On real frames pooled the spread raised the Spearman rank correlation 0.60-0.68
+    -> 0.78-0.80 (docs/benchmarks.md section 17). On clean depth (noise below
+    :data:`~depthnormals.ddm.auto.NOISE_CLEAN`) the i.i.d. model alone: there the spreads
+    and the pairs' angles are the scene's curvature (the factor read 37-355 on the clean
+    synthetic renders)."""
     fx, fy, cx, cy = cam
     p = noise_pass(z, fx, fy, tile=TILE)
     sigma = p.sigma if p.sigma == p.sigma else 0.0
@@ -1681,6 +1692,10 @@ def _plain(z, cam, normals, r: int):
         c = _pair_excess(normals, s, score)
         if c > 1.0:
             s = np.minimum(s * np.float32(c), np.maximum(s, np.float32(PLAIN_CAP)))
+        # the floor: the noise alone (no residual inflation) at its measured excess
+        m0 = _fit_error(z, normals, np.zeros_like(score), 0, tiles, (1.0, 0, 1.0, True), None, cam)
+        level = m0 * np.float32(PLAIN_FLOOR * _pair_excess(normals, m0, score))
+        s = np.fmax(s, np.minimum(level, np.float32(PLAIN_CAP)))  # NaN only where both are
     return np.minimum(s, np.float32(MAX_ERROR))
 
 
@@ -1704,6 +1719,8 @@ def normals_with_uncertainty(compute, depth: Any, K: Any, *, method: str,
     c = (float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy))
     if method == "fals":
         r = int(options.get("window", 5)) // 2
+    elif method in ("plane-pca", "plane-svd"):
+        r = int(options.get("window", 3)) // 2
     else:
         r = max(1, int(float(options.get("normal_smoothing_size", 10.0))) // 2)
     unc = _plain(z, c, normals, r)

@@ -272,7 +272,8 @@ def estimate_normals(depth: torch.Tensor, K: Any, *, method: str = "3f2n+",
     if return_uncertainty:
         if method != "3f2n+":
             raise ValueError(f"return_uncertainty=True needs method '3f2n+' in depthnormals.torch; got "
-                             f"{method!r} (the numba library also maps fals and PCL's modes)")
+                             f"{method!r} (the numba library also maps fals, PCL's modes and the box "
+                             "plane fits)")
         n, unc = _numba_backend(depth, K, method, depth_scale, invalid, options, out_dtype, True)
         # the numba normals came with the map: the torch pass only where it was asked for or a
         # gradient is (a CUDA batch of 8 640x480 frames: 105 -> 59 ms on an H200, docs/torch.md)
