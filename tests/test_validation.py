@@ -448,7 +448,7 @@ def test_masked_array_pixels_are_invalid_and_long_double_is_float64(method):
                                   dn.estimate_normals(z, K, method=method))
 
 
-@pytest.mark.parametrize("method", ["3f2n+", "fals", "pcl-covariance-matrix"])
+@pytest.mark.parametrize("method", ["3f2n+", "fals", "pcl-covariance-matrix", "plane-svd"])
 def test_depths_near_the_dtype_limits_give_unit_normals_or_nan(method):
     """Valid depth is any finite positive number: 1e-300 and 1e300 beside 1 and 2 (float64),
     1e-30 and 1e30 (float32) included. Every normal is unit or NaN and the map is NaN exactly
