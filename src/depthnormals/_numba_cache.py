@@ -35,7 +35,7 @@ __all__ = ["DEPENDENCIES", "compiled_code_digest", "install"]
 #: helpers), as paths inside the package: their edits reach the machine code too.
 #: ``tests/test_numba_cache.py`` checks this against the imports of every module that compiles.
 DEPENDENCIES = ("_parallel.py", "_validate.py", "camera.py", "ddm/_module.py", "io.py",
-                "kernels/depth.py", "metrics.py")
+                "kernels/depth.py")
 
 _ROOTS: dict[Path, tuple[str, ...]] = {}
 

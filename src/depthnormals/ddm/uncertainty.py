@@ -103,7 +103,6 @@ import numpy as np
 
 from .._parallel import run_rows
 from ..kernels.depth import prepare
-from ..metrics import angular_error
 from .auto import (
     GATE,
     NOISE_CLEAN,
@@ -1648,21 +1647,80 @@ def _far_spread(normals: np.ndarray, d: int) -> np.ndarray:
     inside the image), over ``sqrt 2``; NaN where there is none. With ``d`` one window
     across (``2 r + 1``) the two windows share no pixel, so on noise alone the two errors are
     independent and their angle has ``sqrt 2`` times the mean of one (isotropic errors); across
-    an edge or a wrong window the neighbours disagree and the spread rises with the error."""
+    an edge or a wrong window the neighbours disagree and the spread rises with the error.
+    Each angle as :func:`depthnormals.metrics.angular_error` takes it (float64, renormalised,
+    ``atan2``, each pair's once: :func:`_pair_angles_rows`, :func:`_far_spread_rows`)."""
     h, w = normals.shape[:2]
-    acc = np.zeros((h, w))
-    cnt = np.zeros((h, w))
-    for dv, du in ((0, d), (d, 0)):
-        if dv >= h or du >= w:
-            continue
-        ang = angular_error(normals[: h - dv, : w - du], normals[dv:, du:])
-        ok = np.isfinite(ang)
-        ang = np.where(ok, ang, 0.0)
-        for part in ((slice(0, h - dv), slice(0, w - du)), (slice(dv, h), slice(du, w))):
-            acc[part] += ang  # the pair's angle counts for both of its pixels
-            cnt[part] += ok
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return (acc / cnt / math.sqrt(2.0)).astype(np.float32)
+    n = np.ascontiguousarray(normals, dtype=np.float32)
+    pairs = np.empty((2, h, w))  # each pair's angle once: to the right, and below
+    run_rows(_pair_angles_rows, h, n, int(d), pairs, min_rows=16)
+    out = np.empty((h, w), dtype=np.float32)
+    run_rows(_far_spread_rows, h, pairs, int(d), out, min_rows=16)
+    return out
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _angle_deg(n, v, u, vv, uu):
+    """The angle (degrees) between the normals at ``(v, u)`` and ``(vv, uu)`` of ``n`` (H, W,
+    3), each renormalised in float64, as ``atan2(|a x b|, a . b)``; NaN where either has no
+    finite non-zero length."""
+    ax, ay, az = np.float64(n[v, u, 0]), np.float64(n[v, u, 1]), np.float64(n[v, u, 2])
+    bx, by, bz = np.float64(n[vv, uu, 0]), np.float64(n[vv, uu, 1]), np.float64(n[vv, uu, 2])
+    la = math.sqrt(ax * ax + ay * ay + az * az)
+    lb = math.sqrt(bx * bx + by * by + bz * bz)
+    if not (la > 0.0 and lb > 0.0 and la < math.inf and lb < math.inf):
+        return math.nan
+    ax, ay, az = ax / la, ay / la, az / la
+    bx, by, bz = bx / lb, by / lb, bz / lb
+    cx = ay * bz - az * by
+    cy = az * bx - ax * bz
+    cz = ax * by - ay * bx
+    return math.degrees(math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz),
+                                   ax * bx + ay * by + az * bz))
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _pair_angles_rows(v0, v1, normals, d, out):
+    """Rows ``[v0, v1)`` of the angles (degrees, :func:`_angle_deg`) of each normal to the one
+    ``d`` to its right (``out[0]``) and ``d`` below (``out[1]``); NaN where that one lies
+    outside the image."""
+    h, w = normals.shape[:2]
+    for v in range(v0, v1):
+        for u in range(w):
+            out[0, v, u] = _angle_deg(normals, v, u, v, u + d) if u + d < w else math.nan
+            out[1, v, u] = _angle_deg(normals, v, u, v + d, u) if v + d < h else math.nan
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _far_spread_rows(v0, v1, pairs, d, out):
+    """Rows ``[v0, v1)`` of :func:`_far_spread` into ``out`` (H, W) float32 from the pairs'
+    angles (:func:`_pair_angles_rows`): to the right, left, below and above, summed in that
+    order."""
+    w = out.shape[1]
+    root2 = math.sqrt(2.0)
+    for v in range(v0, v1):
+        for u in range(w):
+            acc = 0.0
+            cnt = 0
+            a = pairs[0, v, u]
+            if a == a:
+                acc += a
+                cnt += 1
+            if u - d >= 0:
+                a = pairs[0, v, u - d]
+                if a == a:
+                    acc += a
+                    cnt += 1
+            a = pairs[1, v, u]
+            if a == a:
+                acc += a
+                cnt += 1
+            if v - d >= 0:
+                a = pairs[1, v - d, u]
+                if a == a:
+                    acc += a
+                    cnt += 1
+            out[v, u] = np.float32(acc / cnt / root2) if cnt > 0 else np.float32(np.nan)
 
 
 def _plain(z, cam, normals, r: int):
