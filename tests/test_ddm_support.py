@@ -528,9 +528,12 @@ def test_few_pixels_of_a_plane_deviate():
 def test_no_fallback_below_its_radius():
     """A choice of radius FALLBACK_RADIUS or less has no smaller window to fall back to: the
     branch hands the map an infinite limit (no pixel fell back, whatever it deviates), and its
-    normals are the choice's; from radius 3 on the limit is DEVIATION."""
+    normals are the choice's after the face switch; from radius 3 on the limit is DEVIATION.
+    The map's copy of the choice is taken before the switch either way (until session 39,
+    where none fell back it was the output itself, which the switch changes in place)."""
     import dataclasses
 
+    from depthnormals.ddm.faceswitch import switch_faces
     from depthnormals.synth.noise import kinect_v1_noise
 
     z, normals, K, _ = _table_edge((120, 160), f=145.0)
@@ -546,7 +549,11 @@ def test_no_fallback_below_its_radius():
         before, dev, got = scores[2], scores[3], scores[4]
         assert got == limit
         assert (dev > support.DEVIATION).any()  # deviating pixels either way
+        assert not np.shares_memory(before, out)
         if limit == np.inf:
-            assert np.array_equal(out, before, equal_nan=True)
+            switched, _, _ = switch_faces(zp, before.copy(), cam.fx, cam.fy, cam.cx, cam.cy,
+                                          span=support.SWITCH_SPAN)
+            assert np.array_equal(out, switched, equal_nan=True)
+            assert not np.array_equal(out, before, equal_nan=True)  # the switch moved cells
         else:
             assert not np.array_equal(out, before, equal_nan=True)

@@ -761,15 +761,17 @@ def _choose(z: np.ndarray, zc: np.ndarray, args: tuple, out: np.ndarray, min_row
     window's plane (:func:`_fallback_rows`, on the depth ``z``) past :data:`DEVIATION` where
     the choice's radius exceeds :data:`FALLBACK_RADIUS` (else none falls back). Returns the
     deviations (H, W; 0 where ``z`` is invalid, which ``zc`` may fill), the limit past which
-    pixels fell back (inf: none can) and, with ``keep``, the normals of the choice before the
-    fallback (``out`` itself where none fell back; else None)."""
+    pixels fell back (inf: none can) and, with ``keep``, a copy of the normals of the choice
+    before the fallback (else None): a copy even where none fell back, since the face switch
+    then changes ``out`` in place (session 39: where none fell back the map read the switched
+    normals, elsewhere the choice's)."""
     dev = np.empty(z.shape, dtype=np.float32)
     run_rows(_choose_least_rows, z.shape[0], zc, *args, out, dev, min_rows=min_rows)
     if zc is not z:
         dev[np.isnan(z)] = 0.0
     limit = DEVIATION if args[2] > FALLBACK_RADIUS else np.inf
     falls = bool((dev > limit).any())
-    before = (out.copy() if falls else out) if keep else None
+    before = out.copy() if keep else None
     if falls:
         cam = args[4]
         small = box_fit_windows(z, *cam, FALLBACK_RADIUS)
