@@ -475,6 +475,28 @@ def test_box_plane_fits_share_one_map():
     assert float(np.nanmean(u3)) > 1.5 * float(np.nanmean(u2))  # the 3x3 default errs more
 
 
+@pytest.mark.parametrize("method", [m for m in UNCERTAINTY_METHODS if m != "3f2n+"])
+def test_plain_maps_read_the_estimators_own_default_window(method):
+    """A plain fit's map without a window option reads the window the estimator itself
+    defaults to (its signature's, not a copy of it): the same map as that window passed
+    explicitly, and another than the next larger window's."""
+    import inspect
+
+    from depthnormals.registry import get_estimator
+
+    r, d = _kinect_like_plane(1, shape=(60, 80))
+    params = inspect.signature(get_estimator(method).func).parameters
+    option = "window" if "window" in params else "normal_smoothing_size"
+    default = params[option].default
+    _, u = dn.estimate_normals(d, r.K, method=method, return_uncertainty=True)
+    _, u_same = dn.estimate_normals(d, r.K, method=method, return_uncertainty=True,
+                                    **{option: default})
+    _, u_wider = dn.estimate_normals(d, r.K, method=method, return_uncertainty=True,
+                                     **{option: type(default)(default + 4)})
+    np.testing.assert_array_equal(u, u_same)
+    assert not np.array_equal(u, u_wider, equal_nan=True)
+
+
 def _neighbour(a, dv, du):
     """``a`` (H, W, ...) read ``(dv, du)`` away: ``out[v, u] = a[v + dv, u + du]``, NaN
     outside."""

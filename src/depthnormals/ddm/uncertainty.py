@@ -95,6 +95,7 @@ Mises-Fisher concentration of Bae et al. (ICCV 2021): :func:`uncertainty_to_kapp
 
 from __future__ import annotations
 
+import inspect
 import math
 from typing import Any
 
@@ -102,6 +103,14 @@ import numba as nb
 import numpy as np
 
 from .._parallel import run_rows
+from ..estimators.pcl import (
+    pcl_average_3d_gradient,
+    pcl_average_depth_change,
+    pcl_covariance_matrix,
+    pcl_simple_3d_gradient,
+)
+from ..estimators.pointcloud import plane_pca, plane_svd
+from ..estimators.range_image import fals
 from ..kernels.depth import prepare
 from .auto import (
     GATE,
@@ -351,6 +360,24 @@ MAX_ERROR = 90.0
 #: Methods whose uncertainty has a closed form (with their window half-size from the options).
 UNCERTAINTY_METHODS = ("3f2n+", "fals", "pcl-average-3d-gradient", "pcl-average-depth-change",
                        "pcl-covariance-matrix", "pcl-simple-3d-gradient", "plane-pca", "plane-svd")
+
+
+def _default_of(func, option: str):
+    return inspect.signature(func).parameters[option].default
+
+
+#: Each plain fit's window option and its default, read off the estimator's own signature (so
+#: that the map's radius, ``max(1, int(window) // 2)``, follows a changed default).
+_PLAIN_WINDOWS = {
+    "fals": ("window", _default_of(fals, "window")),
+    "plane-pca": ("window", _default_of(plane_pca, "window")),
+    "plane-svd": ("window", _default_of(plane_svd, "window")),
+    **{name: ("normal_smoothing_size", _default_of(func, "normal_smoothing_size"))
+       for name, func in (("pcl-average-3d-gradient", pcl_average_3d_gradient),
+                          ("pcl-average-depth-change", pcl_average_depth_change),
+                          ("pcl-covariance-matrix", pcl_covariance_matrix),
+                          ("pcl-simple-3d-gradient", pcl_simple_3d_gradient))},
+}
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -1775,12 +1802,8 @@ def normals_with_uncertainty(compute, depth: Any, K: Any, *, method: str,
     normals = compute(depth, K, method=method, depth_scale=depth_scale, **options)
     z, cam = prepare(depth, K, depth_scale)
     c = (float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy))
-    if method == "fals":
-        r = int(options.get("window", 5)) // 2
-    elif method in ("plane-pca", "plane-svd"):
-        r = int(options.get("window", 3)) // 2
-    else:
-        r = max(1, int(float(options.get("normal_smoothing_size", 10.0))) // 2)
+    option, default = _PLAIN_WINDOWS[method]
+    r = max(1, int(float(options.get(option, default))) // 2)
     unc = _plain(z, c, normals, r)
     _fill_gaps(normals, unc)
     return normals, unc
