@@ -255,7 +255,8 @@ def estimate_normals(depth: torch.Tensor, K: Any, *, method: str = "3f2n+",
     >>> import torch
     >>> from depthnormals.torch import estimate_normals
     >>> depth = torch.full((1, 1, 4, 5), 2.0)
-    >>> estimate_normals(depth, (500.0, 500.0, 2.0, 1.5), method="3f2n")[0, :, 1, 2].tolist()
+    >>> n = estimate_normals(depth, (500.0, 500.0, 2.0, 1.5), method="3f2n")
+    >>> n[0, :, 1, 2].round(decimals=6).tolist()  # (unit length to float32's last bit)
     [0.0, 0.0, -1.0]
     """
     base = _check_method(method)
