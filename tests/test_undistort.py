@@ -322,9 +322,26 @@ def test_a_ros_camera_info_distortion_is_named_not_applied(tmp_path, capsys):
     assert "not applied" not in capsys.readouterr().err
     np.testing.assert_array_equal(np.load(tmp_path / "m.npy"), dn.estimate_normals(
         dn.undistort_depth(raw_depth(), K, DIST), K, depth_scale=0.001))
-    # zeros (most depth cameras' camera_info), or a fisheye model: nothing to say
+    # zeros (most depth cameras' camera_info): nothing to say
     cam.write_text(cam.read_text().replace(f"data: [{data}]", "data: [0, 0, 0, 0, 0, 0, 0, 0]"))
-    assert read_camera_file(cam).ros_distortion == ()
-    cam.write_text(cam.read_text().replace("rational_polynomial", "equidistant").replace(
-        "data: [0, 0, 0, 0, 0, 0, 0, 0]", "data: [0.1, 0.01, 0.0, 0.0]"))
-    assert read_camera_file(cam).ros_distortion == ()
+    info = read_camera_file(cam)
+    assert info.ros_distortion == () and info.ros_other_lens == ""
+    assert main(["estimate", str(src), "-K", str(cam), "--depth-scale", "0.001", "-o",
+                 str(tmp_path / "z.npy")]) == 0
+    assert "not applied" not in capsys.readouterr().err
+    # a fisheye model, or OpenCV's with coefficients it cannot read: not applied either, and
+    # said (until session 39 nothing was, and an image_raw stream read as pinhole silently)
+    for model, coeffs in (("equidistant", "0.1, 0.01, 0.0, 0.0"),
+                          ("plumb_bob", "0.1, 0.01, 0.0, 0.0, 0.0, 0.0, 0.0")):
+        cam.write_text(cam.read_text().replace("rational_polynomial", model).replace(
+            "data: [0, 0, 0, 0, 0, 0, 0, 0]", f"data: [{coeffs}]"))
+        info = read_camera_file(cam)
+        assert info.ros_distortion == () and info.ros_other_lens == model
+        assert main(["estimate", str(src), "-K", str(cam), "--depth-scale", "0.001", "-o",
+                     str(tmp_path / "f.npy")]) == 0
+        err = capsys.readouterr().err
+        assert f"model {model!r}" in err and "not applied" in err and "rectify" in err
+        np.testing.assert_array_equal(np.load(tmp_path / "f.npy"),
+                                      dn.estimate_normals(raw_depth(), K, depth_scale=0.001))
+        cam.write_text(cam.read_text().replace(model, "rational_polynomial").replace(
+            f"data: [{coeffs}]", "data: [0, 0, 0, 0, 0, 0, 0, 0]"))

@@ -396,6 +396,11 @@ class CameraFile:
         topics are taken as rectified (``image_rect``); the command line says so and names
         ``--distortion`` for an ``image_raw`` stream. () when absent, all 0, or of another
         model.
+    ros_other_lens : str
+        The ``distortion_model`` of a ROS ``camera_info`` whose non-zero ``D`` is of a model
+        :func:`depthnormals.undistort_depth` cannot undo (``equidistant``, a fisheye) or does
+        not read as OpenCV's coefficients; "" otherwise. Not applied either: the command line
+        says so (rectify an ``image_raw`` stream first).
     """
 
     K: Intrinsics
@@ -407,6 +412,7 @@ class CameraFile:
     raw_format: str | None = None
     distortion: tuple[float, ...] = ()
     ros_distortion: tuple[float, ...] = ()
+    ros_other_lens: str = ""
 
 
 def read_camera_file(path: str | Path) -> CameraFile:
@@ -560,21 +566,29 @@ def _mapping_camera(data: dict, path: Path) -> CameraFile:
     return CameraFile(K, scale, codes, max_depth, path, encoding,
                       None if raw_format is None else str(raw_format),
                       lens_distortion(extras.get("distortion"), '"distortion"'),
-                      _ros_distortion(data))
+                      *_ros_lens(data))
 
 
-def _ros_distortion(data: dict) -> tuple[float, ...]:
-    """A ROS ``camera_info``'s ``D`` when non-zero and of OpenCV's models, else ()."""
-    model = str(data.get("distortion_model", "plumb_bob")).lower()
+def _ros_lens(data: dict) -> tuple[tuple[float, ...], str]:
+    """A ROS ``camera_info``'s ``D`` when non-zero and of OpenCV's models, and ""; ``((),
+    model)`` where a non-zero ``D`` is of another model or not OpenCV's coefficients; ``((),
+    "")`` where there is none."""
+    model = str(data.get("distortion_model", "plumb_bob")).strip()
     value = next((data[k] for k in ("D", "d", "distortion_coefficients") if k in data), None)
-    if value is None or model not in ("plumb_bob", "rational_polynomial"):
-        return ()
     if isinstance(value, dict):
         value = value.get("data", ())
     try:
-        return lens_distortion(value)
+        d = np.asarray(value if value is not None else (), dtype=np.float64).reshape(-1)
     except (TypeError, ValueError):
-        return ()
+        return (), model
+    if not np.any(d != 0):  # none, all 0 (most depth cameras' camera_info) or NaN only
+        return (), ""
+    if model.lower() not in ("plumb_bob", "rational_polynomial"):
+        return (), model
+    try:
+        return lens_distortion(tuple(float(x) for x in d)), ""
+    except (TypeError, ValueError):
+        return (), model
 
 
 _EXTRAS = ("depth_scale", "invalid", "invalid_value", "max_depth", "encoding", "raw_format",

@@ -180,6 +180,13 @@ def read_settings(args: argparse.Namespace, camera: Any) -> ReadSettings:
               f"{list(ros)} (ROS camera_info), which is not applied: ROS depth topics are taken as "
               "rectified (image_rect); for an image_raw stream pass --distortion "
               f"{','.join(format(c, '.10g') for c in ros)}", file=sys.stderr)
+    other = getattr(camera, "ros_other_lens", "")
+    if other and args.distortion is None and not dist:
+        print(f"depthnormals estimate: note: {camera.source} gives a lens distortion of model "
+              f"{other!r} (ROS camera_info), which is not applied: ROS depth topics are taken as "
+              "rectified (image_rect), and depthnormals.undistort_depth cannot undo it as given "
+              "(OpenCV's plumb_bob / rational_polynomial, 4, 5, 8 or 12 finite coefficients); "
+              "rectify an image_raw stream first", file=sys.stderr)
     return ReadSettings(scale, tuple(invalid), max_depth, lens_distortion(dist))
 
 
