@@ -21,6 +21,18 @@ valid depth), the same correspondence threshold, iteration cap and convergence t
 - ``o3d-default``: Open3D's default pipeline: ``PointCloud.estimate_normals`` (KNN 30) on the
   subsampled target cloud, then the same ``registration_icp``.
 
+Two more with ``--variants`` (not in the default table): the uncertainty read as what it is, a
+part of each pair's residual variance. The point-to-plane residual ``n . (p - q)`` errs by the
+depth noise of both points along the normal and by the normal's error times the offset ``p -
+q``: variance ``2 s_z^2 + |p - q|^2 s_n^2``, ``s_z`` the target point's depth noise (the frame's
+measured level, ``noise_profile(...).sigma`` footprints, times ``z / fx``) and ``s_n = u /
+sqrt(pi / 2)`` (radians; the per-axis spread of a Rayleigh angle of mean ``u``):
+
+- ``ours-residual``: each pair weighted by the inverse of that variance (recomputed every
+  iteration, as the pairs change);
+- ``ours-depth-noise``: the same without the normal's term, ``1 / (2 s_z^2)``: what the depth's
+  noise alone gives, to tell the map's part from it.
+
 Starts: ``identity`` (the frames are 0.23-1.46 m and 4-25 deg apart: a plain-ICP failure
 case, reported for completeness) and ``perturbed``: the reference pose moved by
 ``--perturb-deg`` about a random axis and ``--perturb-mm`` in a random direction (the same
@@ -32,6 +44,7 @@ errors near a common floor across variants are likely to be that floor.
 
     python benchmarks/icp.py [--step 4] [--max-dist 0.05] [--iterations 50] [--seeds 5]
                              [--perturb-deg 3] [--perturb-mm 50] [--floor 1.0] [--json OUT]
+                             [--variants ours,ours-weighted,...]
 
 docs/benchmarks.md section 18 has the table and the reading.
 """
@@ -53,6 +66,8 @@ from depthnormals.camera import backproject
 ROOT = (Path(__file__).resolve().parents[2] / "shared" / "data" / "real-sensors"
         / "nyu_registered_kinect1_slambook")
 VARIANTS = ("ours", "ours-weighted", "o3d-icp-ours", "o3d-default")
+#: The residual-variance weightings (module doc), run with ``--variants``.
+RESIDUAL_VARIANTS = ("ours-residual", "ours-depth-noise")
 #: Open3D's default ICPConvergenceCriteria tolerances (fitness, inlier RMSE).
 RELATIVE_FITNESS = 1e-6
 RELATIVE_RMSE = 1e-6
@@ -119,6 +134,7 @@ class Frame(NamedTuple):
     pose: np.ndarray
     normals: np.ndarray
     uncertainty: np.ndarray
+    sigma: float = float("nan")  # the frame's measured noise level, footprints
 
 
 def load_frames(root: Path = ROOT) -> list[Frame]:
@@ -130,7 +146,8 @@ def load_frames(root: Path = ROOT) -> list[Frame]:
     for f in sorted(read_realsensors(root), key=lambda f: int(f.name)):
         K = dn.as_intrinsics(f.K)
         n, u = dn.estimate_normals(f.depth, K, return_uncertainty=True)
-        frames.append(Frame(f.name, f.depth, K, quat_pose(*poses[int(f.name) - 1]), n, u))
+        frames.append(Frame(f.name, f.depth, K, quat_pose(*poses[int(f.name) - 1]), n, u,
+                            dn.noise_profile(f.depth, K).sigma))
     return frames
 
 
@@ -141,6 +158,7 @@ class Cloud(NamedTuple):
     points: np.ndarray
     normals: np.ndarray
     uncertainty: np.ndarray
+    noise: np.ndarray | None = None  # each point's depth noise (m), where the frame has a level
 
 
 def subsample(frame: Frame, step: int) -> Cloud:
@@ -149,7 +167,9 @@ def subsample(frame: Frame, step: int) -> Cloud:
     n = frame.normals[::step, ::step]
     u = frame.uncertainty[::step, ::step]
     ok = np.all(np.isfinite(pts), axis=-1) & (frame.depth[::step, ::step] > 0)
-    return Cloud(pts[ok].astype(np.float64), n[ok].astype(np.float64), u[ok].astype(np.float64))
+    pts = pts[ok].astype(np.float64)
+    noise = pts[:, 2] * (frame.sigma / frame.K.fx) if frame.sigma > 0.0 else None
+    return Cloud(pts, n[ok].astype(np.float64), u[ok].astype(np.float64), noise)
 
 
 def moved_scene(scene: Any, yaw_deg: float, t: Any) -> tuple[Any, np.ndarray]:
@@ -226,15 +246,17 @@ def gauss_newton_step(p: np.ndarray, q: np.ndarray, n: np.ndarray,
 def point_to_plane_icp(source: np.ndarray, target: np.ndarray, target_normals: np.ndarray,
                        init: np.ndarray, *, max_dist: float, iterations: int,
                        target_weights: np.ndarray | None = None,
-                       nearest: Nearest | None = None) -> dict[str, Any]:
+                       nearest: Nearest | None = None,
+                       pair_weights: Any = None) -> dict[str, Any]:
     """Point-to-plane ICP of ``source`` onto ``target`` (Open3D's loop, our solver).
 
     Each iteration pairs every transformed source point with its nearest target point, keeps
     the pairs closer than ``max_dist`` (the inliers), takes one Gauss-Newton step
-    (:func:`gauss_newton_step`, weights ``target_weights`` of the paired target points, or 1)
-    and applies it on the left (``T <- exp(xi) T``). It stops after ``iterations`` steps, or
-    when the fitness (inliers / source points) and the inlier RMSE (point-to-point, m) both
-    change by less than 1e-6, as Open3D's ``registration_icp`` does.
+    (:func:`gauss_newton_step`, weights ``target_weights`` of the paired target points, or
+    ``pair_weights(p, q, idx)`` of the pairs themselves, or 1) and applies it on the left
+    (``T <- exp(xi) T``). It stops after ``iterations`` steps, or when the fitness (inliers /
+    source points) and the inlier RMSE (point-to-point, m) both change by less than 1e-6, as
+    Open3D's ``registration_icp`` does.
 
     Returns
     -------
@@ -257,6 +279,8 @@ def point_to_plane_icp(source: np.ndarray, target: np.ndarray, target_normals: n
         if len(idx) < 6:
             break
         w = None if target_weights is None else target_weights[idx]
+        if pair_weights is not None:
+            w = pair_weights(p, target[idx], idx)
         xi = gauss_newton_step(p, target[idx], target_normals[idx], w)
         step = np.eye(4)
         step[:3, :3] = rodrigues(xi[:3])
@@ -298,6 +322,21 @@ def weights_from_uncertainty(u: np.ndarray, floor: float) -> np.ndarray:
     return 1.0 / np.maximum(u, floor) ** 2
 
 
+def residual_weights(noise: np.ndarray, u: np.ndarray | None):
+    """``pair_weights`` of :func:`point_to_plane_icp`: the inverse of each pair's residual
+    variance ``2 s_z^2 + |p - q|^2 s_n^2`` (module doc; ``noise`` the target points' ``s_z``, m,
+    ``u`` their expected normal error, deg; None: the depth's term alone)."""
+    s_n2 = None if u is None else (np.radians(u) / np.sqrt(np.pi / 2.0)) ** 2
+    s_z2 = 2.0 * noise ** 2
+
+    def weights(p: np.ndarray, q: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        var = s_z2[idx]
+        if s_n2 is not None:
+            var = var + np.sum((p - q) ** 2, axis=1) * s_n2[idx]
+        return 1.0 / var
+    return weights
+
+
 def register_pair(source: Cloud, target: Cloud, init: np.ndarray, *, max_dist: float,
                   iterations: int, floor: float,
                   variants: tuple[str, ...] = VARIANTS) -> dict[str, dict[str, Any]]:
@@ -305,7 +344,10 @@ def register_pair(source: Cloud, target: Cloud, init: np.ndarray, *, max_dist: f
     ok = np.all(np.isfinite(target.normals), axis=1)  # our normals: the target points that have one
     t_pts, t_n, t_u = target.points[ok], target.normals[ok], target.uncertainty[ok]
     out: dict[str, dict[str, Any]] = {}
-    nearest = Nearest(t_pts) if {"ours", "ours-weighted"} & set(variants) else None
+    nearest = (Nearest(t_pts) if {"ours", "ours-weighted", *RESIDUAL_VARIANTS} & set(variants)
+               else None)
+    if set(RESIDUAL_VARIANTS) & set(variants) and target.noise is None:
+        raise ValueError(f"{', '.join(RESIDUAL_VARIANTS)} need the target frame's noise level")
     for v in variants:
         t0 = time.perf_counter()
         if v == "ours":
@@ -315,13 +357,18 @@ def register_pair(source: Cloud, target: Cloud, init: np.ndarray, *, max_dist: f
             r = point_to_plane_icp(source.points, t_pts, t_n, init, max_dist=max_dist,
                                    iterations=iterations, nearest=nearest,
                                    target_weights=weights_from_uncertainty(t_u, floor))
+        elif v in RESIDUAL_VARIANTS:
+            pw = residual_weights(target.noise[ok], t_u if v == "ours-residual" else None)
+            r = point_to_plane_icp(source.points, t_pts, t_n, init, max_dist=max_dist,
+                                   iterations=iterations, nearest=nearest, pair_weights=pw)
         elif v == "o3d-icp-ours":
             r = open3d_icp(source.points, t_pts, t_n, init, max_dist=max_dist, iterations=iterations)
         elif v == "o3d-default":
             r = open3d_icp(source.points, target.points, None, init, max_dist=max_dist,
                            iterations=iterations)
         else:
-            raise ValueError(f"unknown variant {v!r}; use {', '.join(VARIANTS)}")
+            raise ValueError(f"unknown variant {v!r}; use "
+                             f"{', '.join(VARIANTS + RESIDUAL_VARIANTS)}")
         r["seconds"] = time.perf_counter() - t0
         out[v] = r
     return out
@@ -438,14 +485,21 @@ def main(argv: list[str] | None = None) -> int:
                         help="uncertainty floor of the weights, degrees")
     parser.add_argument("--json", type=Path, default=None, metavar="OUT",
                         help="write every run, the settings and the machine here")
+    parser.add_argument("--variants", default=",".join(VARIANTS),
+                        help=f"comma-separated, of {', '.join(VARIANTS + RESIDUAL_VARIANTS)}")
     args = parser.parse_args(argv)
     if not args.root.is_dir():
         parser.error(f"{args.root} does not exist")
+    variants = tuple(v.strip() for v in args.variants.split(",") if v.strip())
+    bad = sorted(set(variants) - set(VARIANTS + RESIDUAL_VARIANTS))
+    if bad or not variants:
+        parser.error(f"--variants: unknown {bad or 'none given'}; use "
+                     f"{', '.join(VARIANTS + RESIDUAL_VARIANTS)}")
     t0 = time.perf_counter()
     frames = load_frames(args.root)  # our normals first: numba before Open3D's TBB is loaded
     records = run(frames, step=args.step, max_dist=args.max_dist, iterations=args.iterations,
                   seeds=args.seeds, perturb_deg=args.perturb_deg, perturb_mm=args.perturb_mm,
-                  floor=args.floor)
+                  floor=args.floor, variants=variants)
     import open3d
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -463,15 +517,19 @@ def main(argv: list[str] | None = None) -> int:
                                       f"{args.perturb_deg} deg and {args.perturb_mm} mm"),
                         ("identity", "identity start")):
         print(f"### {start} ({what}); means over the starts\n")
-        print(table(records, start, VARIANTS))
+        print(table(records, start, variants))
         summary[start] = {f"{a} vs {b}": head_to_head(records, start, a, b)
                           for a, b in (("ours", "ours-weighted"), ("o3d-default", "ours-weighted"),
-                                       ("o3d-default", "ours"), ("o3d-icp-ours", "ours"))}
+                                       ("o3d-default", "ours"), ("o3d-icp-ours", "ours"),
+                                       ("ours", "ours-residual"), ("ours", "ours-depth-noise"),
+                                       ("ours-depth-noise", "ours-residual"),
+                                       ("o3d-default", "ours-depth-noise"))
+                          if a in variants and b in variants}
         for k, h in summary[start].items():
             print(f"\n{k}: the second lower in rotation on {h['b_better_rot']}/{h['runs']} runs, "
                   f"in translation on {h['b_better_trans']}/{h['runs']}; mean difference "
                   f"{h['mean_rot_diff_deg']:+.3f} deg, {h['mean_trans_diff_mm']:+.1f} mm")
-        loops = {v: loop_errors(records, start, v) for v in VARIANTS}
+        loops = {v: loop_errors(records, start, v) for v in variants}
         summary[start]["loop"] = {v: {"triples": len(x), "mean_rot_deg": _mean(x, "rot_deg"),
                                       "mean_trans_mm": _mean(x, "trans_mm")}
                                   for v, x in loops.items()}
@@ -488,6 +546,7 @@ def main(argv: list[str] | None = None) -> int:
                          "iterations": args.iterations, "seeds": args.seeds,
                          "perturb_deg": args.perturb_deg, "perturb_mm": args.perturb_mm,
                          "uncertainty_floor_deg": args.floor, "open3d_knn": 30,
+                         "variants": list(variants),
                          "root": str(args.root)},
             "summary": summary, "runs": records}, indent=1) + "\n")
     return 0

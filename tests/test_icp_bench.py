@@ -74,6 +74,22 @@ def test_weights(icp):
     np.testing.assert_allclose(w, [1.0, 1.0, 0.25, 0.01])
 
 
+def test_residual_weights(icp):
+    """The inverse of a pair's residual variance ``2 s_z^2 + |p - q|^2 s_n^2``, ``s_n`` the
+    per-axis spread of a Rayleigh angle of mean ``u`` (u / sqrt(pi / 2), radians); without the
+    map the depth's term alone. Read per pair through ``idx`` (the target points paired)."""
+    noise = np.array([0.001, 0.002, 0.004])
+    u = np.array([0.0, 10.0, 40.0])
+    p = np.array([[0.01, 0.0, 1.0], [0.0, 0.02, 1.0]])
+    q = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
+    idx = np.array([2, 1])
+    s_n = np.radians([40.0, 10.0]) / np.sqrt(np.pi / 2.0)
+    want = 1.0 / (2.0 * np.array([0.004, 0.002]) ** 2 + np.array([1e-4, 4e-4]) * s_n ** 2)
+    np.testing.assert_allclose(icp.residual_weights(noise, u)(p, q, idx), want, rtol=1e-12)
+    np.testing.assert_allclose(icp.residual_weights(noise, None)(p, q, idx),
+                               [1.0 / 3.2e-5, 1.0 / 8e-6], rtol=1e-12)
+
+
 _SCRIPT = r"""
 import importlib.util, json, sys
 import numpy as np
