@@ -289,6 +289,27 @@ def test_torch_twin_gives_the_numpy_pixels():
         tundistort(torch.zeros(4, 4), K, (0.1,))
 
 
+@pytest.mark.parametrize("extra, kept, other", [
+    ({"distortion_model": "plumb_bob", "D": [0.1, 0.2, 0.0, 0.0, 0.0]}, (0.1, 0.2, 0.0, 0.0, 0.0), ""),
+    ({"D": [0.1, 0.2, 0.0, 0.0]}, (0.1, 0.2, 0.0, 0.0), ""),  # ROS's default model
+    ({"distortion_model": "equidistant", "D": [0.0, 0.0, 0.0, 0.0]}, (), ""),  # nothing to undo
+    ({"distortion_model": "equidistant", "D": [0.1, 0.0, 0.0, 0.0]}, (), "equidistant"),
+    ({"distortion_model": "", "D": [0.1, 0.0, 0.0, 0.0]}, (), "(none named)"),
+    ({"distortion_model": "plumb_bob", "D": [0.1, 0.0, 0.0, float("nan")]}, (), "plumb_bob"),
+    ({"distortion_model": "plumb_bob", "D": "k1=0.1"}, (), "plumb_bob"),
+])
+def test_a_ros_distortion_is_kept_or_named(tmp_path, extra, kept, other):
+    """A camera file's ROS ``D``: kept where OpenCV's model reads it, else its model named
+    for the command line's note (never dropped without a word), nothing where it is all 0."""
+    from depthnormals.io import read_camera_file
+
+    cam = tmp_path / "camera_info.json"
+    cam.write_text(json.dumps({"K": [500.0, 0.0, 320.0, 0.0, 500.0, 240.0, 0.0, 0.0, 1.0],
+                               **extra}))
+    info = read_camera_file(cam)
+    assert (info.ros_distortion, info.ros_other_lens) == (kept, other)
+
+
 def test_a_ros_camera_info_distortion_is_named_not_applied(tmp_path, capsys):
     """ROS depth topics are taken as rectified (image_rect): the ``D`` of a camera_info is not
     applied, but the command line says it is there and how to apply it (an image_raw stream

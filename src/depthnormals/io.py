@@ -573,7 +573,7 @@ def _ros_lens(data: dict) -> tuple[tuple[float, ...], str]:
     """A ROS ``camera_info``'s ``D`` when non-zero and of OpenCV's models, and ""; ``((),
     model)`` where a non-zero ``D`` is of another model or not OpenCV's coefficients; ``((),
     "")`` where there is none."""
-    model = str(data.get("distortion_model", "plumb_bob")).strip()
+    model = str(data.get("distortion_model", "plumb_bob")).strip() or "(none named)"
     value = next((data[k] for k in ("D", "d", "distortion_coefficients") if k in data), None)
     if isinstance(value, dict):
         value = value.get("data", ())
@@ -581,7 +581,7 @@ def _ros_lens(data: dict) -> tuple[tuple[float, ...], str]:
         d = np.asarray(value if value is not None else (), dtype=np.float64).reshape(-1)
     except (TypeError, ValueError):
         return (), model
-    if not np.any(d != 0):  # none, all 0 (most depth cameras' camera_info) or NaN only
+    if not np.any(d != 0):  # none, or all 0 (most depth cameras' camera_info)
         return (), ""
     if model.lower() not in ("plumb_bob", "rational_polynomial"):
         return (), model
