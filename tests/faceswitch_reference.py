@@ -22,9 +22,11 @@ def _shift(a: np.ndarray, dv: int, du: int) -> np.ndarray:
 
 def reference_switch(z: np.ndarray, normals: np.ndarray, cam: tuple, span: int, *,
                      angle: float = 20.0, jump: float = 0.02,
-                     margin: float = 0.7) -> tuple[np.ndarray, np.ndarray]:
+                     margin: float = 0.7, decisions: bool = False) -> tuple[np.ndarray, ...]:
     """The switched normals (float32) and the switch mask of ``normals`` (H, W, 3) on ``z``
-    (H, W, NaN invalid) of the grid ``cam = (fx, fy, cx, cy)``."""
+    (H, W, NaN invalid) of the grid ``cam = (fx, fy, cx, cy)``; with ``decisions``, also
+    where a cell saw another face (every candidate plane of both faces read), ``log(other /
+    same)`` and the angle (degrees) to the other face there, NaN elsewhere."""
     fx, fy, cx, cy = cam
     h, w = z.shape
     n = np.where(np.isfinite(z)[..., None], normals, np.nan).astype(np.float32)
@@ -76,4 +78,12 @@ def reference_switch(z: np.ndarray, normals: np.ndarray, cam: tuple, span: int, 
         other = np.where(take, m, other)
         best = np.where(take[..., None], nq, best)
     switch = smooth & ok & (other < margin * same)
-    return np.where(switch[..., None], best, normals).astype(np.float32), switch
+    out = np.where(switch[..., None], best, normals).astype(np.float32)
+    if not decisions:
+        return out, switch
+    seen = smooth & ok & np.isfinite(other)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        log = np.log(np.maximum(other, 1e-300) / np.maximum(same, 1e-300))
+        cosine = np.clip((n.astype(np.float64) * best).sum(-1), -1.0, 1.0)
+    return (out, switch, np.where(seen, log, np.nan),
+            np.where(seen, np.degrees(np.arccos(cosine)), np.nan))

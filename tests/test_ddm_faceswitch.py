@@ -66,6 +66,34 @@ def test_agrees_with_the_numpy_reference(scene, model):
     assert np.isnan(dec[1][~seen]).all()
 
 
+def test_the_decisions_agree_with_the_numpy_reference():
+    """What the map reads of the switch: where a cell saw another face, ``log(other / same)``
+    over every candidate plane of both faces, and the angle to the other face; against the
+    reference's (direct sums, every plane read): the same cells, the logarithms within 1e-6
+    (the fits' sums rounded in another order), the angles within 1e-3 deg (float32 normals)."""
+    _, z = _frame("demo-room", kinect_v1_noise)
+    captured = {}
+    orig = support.switch_faces
+
+    def spy(zz, n, *a, **k):
+        captured["args"] = (zz.copy(), n.copy(), a, k)
+        return orig(zz, n, *a, **k)
+
+    support.switch_faces = spy
+    try:
+        dn.estimate_normals(z, K)
+    finally:
+        support.switch_faces = orig
+    zz, n, a, k = captured["args"]
+    _, _, dec = faceswitch.switch_faces(zz, n.copy(), *a, span=k["span"], decisions=True)
+    _, _, log, theta = reference_switch(zz, n, a, k["span"], decisions=True)
+    seen = np.isfinite(dec[0])
+    assert seen.sum() > 0.05 * seen.size  # a fifth of the cells of a Kinect frame, about
+    np.testing.assert_array_equal(seen, np.isfinite(log))
+    np.testing.assert_allclose(dec[0][seen], log[seen], rtol=0.0, atol=1e-6)
+    np.testing.assert_allclose(dec[1][seen], theta[seen], rtol=0.0, atol=1e-3)
+
+
 def test_a_carried_face_goes_back():
     """Clean depth, exact normals, then the normals of the cells within 3 px below a crease
     replaced by the face above it: most carried cells take their own face again, exactly, and
