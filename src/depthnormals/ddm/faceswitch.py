@@ -269,7 +269,7 @@ def _switch_rows(v0, v1, z, n, cam, span, cos_min, jump, margin, want, out, out_
     centroid of its own cell's 3x3), every loop along a row but the cells that see another
     face, whose set bits of direction it walks (no branch on a test that flips at random;
     with ``want``, every decided cell's eight distances over the row's list of them, then
-    selects: session 39, 0.25-0.9 -> 0.1-0.5 ms a 640x480 frame, the same values); the row's
+    selects: session 39, 0.3-0.9 -> 0.1-0.35 ms a 640x480 frame, the same values); the row's
     decisions take their logarithms and arc cosines together (:func:`_log_acos`)."""
     h, w = z.shape
     nd = DIRECTIONS.shape[0]
