@@ -30,13 +30,10 @@ def _frame(scene: str, model, seed: int = 0):
     return r, z
 
 
-@pytest.mark.parametrize("scene, model", [("box-on-floor", kinect_v1_noise),
-                                          ("stairs", realsense_d4xx_noise),
-                                          ("demo-room", kinect_v1_noise)])
-def test_agrees_with_the_numpy_reference(scene, model):
-    """The default's own chosen normals (before the switch) switched by both: the same cells
-    and the same normals (the kernel's pre-test and its ring change nothing); some cells
-    switch, a few per cent at most."""
+def _switch_inputs(scene, model):
+    """What the default's branch hands the face switch on a frame of ``scene`` under the
+    sensor ``model``: its depth grid, its chosen normals (before the switch), the camera of
+    that grid and the keyword options."""
     _, z = _frame(scene, model)
     captured = {}
     orig = support.switch_faces
@@ -50,7 +47,17 @@ def test_agrees_with_the_numpy_reference(scene, model):
         dn.estimate_normals(z, K)
     finally:
         support.switch_faces = orig
-    zz, n, a, k = captured["args"]
+    return captured["args"]
+
+
+@pytest.mark.parametrize("scene, model", [("box-on-floor", kinect_v1_noise),
+                                          ("stairs", realsense_d4xx_noise),
+                                          ("demo-room", kinect_v1_noise)])
+def test_agrees_with_the_numpy_reference(scene, model):
+    """The default's own chosen normals (before the switch) switched by both: the same cells
+    and the same normals (the kernel's pre-test and its ring change nothing); some cells
+    switch, a few per cent at most."""
+    zz, n, a, k = _switch_inputs(scene, model)
     got, mask, dec = faceswitch.switch_faces(zz, n.copy(), *a, span=k["span"], decisions=True)
     ref, ref_mask = reference_switch(zz, n, a, k["span"])
     assert 0 < mask.sum() < 0.05 * mask.size
@@ -71,20 +78,7 @@ def test_the_decisions_agree_with_the_numpy_reference():
     over every candidate plane of both faces, and the angle to the other face; against the
     reference's (direct sums, every plane read): the same cells, the logarithms within 1e-6
     (the fits' sums rounded in another order), the angles within 1e-3 deg (float32 normals)."""
-    _, z = _frame("demo-room", kinect_v1_noise)
-    captured = {}
-    orig = support.switch_faces
-
-    def spy(zz, n, *a, **k):
-        captured["args"] = (zz.copy(), n.copy(), a, k)
-        return orig(zz, n, *a, **k)
-
-    support.switch_faces = spy
-    try:
-        dn.estimate_normals(z, K)
-    finally:
-        support.switch_faces = orig
-    zz, n, a, k = captured["args"]
+    zz, n, a, k = _switch_inputs("demo-room", kinect_v1_noise)
     _, _, dec = faceswitch.switch_faces(zz, n.copy(), *a, span=k["span"], decisions=True)
     _, _, log, theta = reference_switch(zz, n, a, k["span"], decisions=True)
     seen = np.isfinite(dec[0])
