@@ -28,9 +28,10 @@ _SELF_WEIGHT = 3.0
 _CAP = 1.0
 
 
-# reassociation lets LLVM vectorise the residual sums; no-NaN flags are never allowed (the
+# no reassociation (as in boxfit.py: code compiled in the process and loaded from numba's
+# cache may round reassociated sums differently); no-NaN flags are never allowed (the
 # support holds finite points only, but candidates' NaN normals are tested explicitly)
-_FASTMATH = {"reassoc", "contract", "nsz", "arcp"}
+_FASTMATH = {"contract", "nsz", "arcp"}
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", fastmath=_FASTMATH)
