@@ -53,8 +53,8 @@ __all__ = ["LOCAL_CAP", "SHIFTS", "box_fit_normals", "box_fit_windows", "choose_
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
 # no reassociation: with it, code compiled in the process and the same code loaded from
 # numba's cache rounded the windows' sums differently (session 39: the residual scores of a
-# kinect_v2 frame at 80 of 217,088 pixels, 1 ulp; the sums vectorise without it, and the
-# default's time did not move); no-NaN flags are never allowed
+# kinect_v2 frame at 80 of 217,088 pixels, 1 ulp; without it the default's time did not
+# move, one thread: tests/test_numba_cache.py); no-NaN flags are never allowed
 _FASTMATH = {"contract", "nsz", "arcp"}
 #: The fewest valid pixels a window needs (three parameters, a residual of >= 3 degrees).
 MIN_POINTS = 6
