@@ -122,7 +122,8 @@ def depth_to_normals(depth: torch.Tensor, camera_matrix: torch.Tensor,
     >>> import torch
     >>> from depthnormals.compat import depth_to_normals
     >>> K = torch.tensor([[[500.0, 0.0, 2.0], [0.0, 500.0, 1.5], [0.0, 0.0, 1.0]]])
-    >>> depth_to_normals(torch.full((1, 1, 4, 5), 2.0), K)[0, :, 1, 2].tolist()
+    >>> n = depth_to_normals(torch.full((1, 1, 4, 5), 2.0), K)
+    >>> n[0, :, 1, 2].round(decimals=6).tolist()  # (unit length to float32's last bit)
     [0.0, 0.0, 1.0]
     """
     import torch
