@@ -435,11 +435,6 @@ def _switch_rows(v0, v1, z, n, cam, span, cos_min, jump, margin, want, out, out_
                     g_same[j0] = min(g_same[j0], m) if (g_sb[j0] >> k) & 1 == 1 else g_same[j0]
         for j0 in range(c):
             u = idx[j0]
-            other = np.inf
-            best = -1
-            ob = obits[u]
-            same = own[u]
-            sb = sbits[u]
             if want:
                 other = g_other[j0]
                 best = g_best[j0]
@@ -447,6 +442,9 @@ def _switch_rows(v0, v1, z, n, cam, span, cos_min, jump, margin, want, out, out_
                 if best < 0:
                     continue
             else:
+                other = np.inf
+                best = -1
+                ob = obits[u]
                 for j in range(_COUNT[ob]):  # the other face's planes first (set bits: no
                     k = _BITS[ob, j]  # branch on a direction whose test flips at random)
                     r = v + span * DIRECTIONS[k, 0]
@@ -457,6 +455,8 @@ def _switch_rows(v0, v1, z, n, cam, span, cos_min, jump, margin, want, out, out_
                 if best < 0:
                     continue
                 # then the own face's: the cell's own plane and the candidates within the angle
+                same = own[u]
+                sb = sbits[u]
                 for j in range(_COUNT[sb]):
                     if not (other < margin * same):
                         break  # the normals alone need no more
