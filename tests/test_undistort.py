@@ -292,6 +292,9 @@ def test_torch_twin_gives_the_numpy_pixels():
 @pytest.mark.parametrize("extra, kept, other", [
     ({"distortion_model": "plumb_bob", "D": [0.1, 0.2, 0.0, 0.0, 0.0]}, (0.1, 0.2, 0.0, 0.0, 0.0), ""),
     ({"D": [0.1, 0.2, 0.0, 0.0]}, (0.1, 0.2, 0.0, 0.0), ""),  # ROS's default model
+    # RealSense's name for OpenCV's model (the rosbag reader undoes it too)
+    ({"distortion_model": "Brown Conrady", "D": [0.1, 0.2, 0.0, 0.0, 0.0]},
+     (0.1, 0.2, 0.0, 0.0, 0.0), ""),
     ({"distortion_model": "equidistant", "D": [0.0, 0.0, 0.0, 0.0]}, (), ""),  # nothing to undo
     ({"distortion_model": "equidistant", "D": [0.1, 0.0, 0.0, 0.0]}, (), "equidistant"),
     ({"distortion_model": "", "D": [0.1, 0.0, 0.0, 0.0]}, (), "(none named)"),

@@ -11,8 +11,8 @@ import numpy as np
 
 from ._validate import check_depth, unmasked
 
-__all__ = ["DISTORTION_LENGTHS", "Intrinsics", "IntrinsicsLike", "as_intrinsics", "backproject",
-           "check_distortion", "lens_distortion", "undistort_depth"]
+__all__ = ["DISTORTION_LENGTHS", "OPENCV_MODELS", "Intrinsics", "IntrinsicsLike", "as_intrinsics",
+           "backproject", "check_distortion", "lens_distortion", "undistort_depth"]
 
 
 @dataclass(frozen=True)
@@ -172,6 +172,10 @@ def backproject(depth: Any, K: Any, *, depth_scale: float | None = None) -> np.n
 #: ``(k1, k2, p1, p2)``, ``+ (k3,)``, ``+ (k4, k5, k6)`` (the rational model) and ``+ (s1, s2,
 #: s3, s4)`` (thin prism).
 DISTORTION_LENGTHS = (4, 5, 8, 12)
+#: The distortion models (ROS ``distortion_model`` names, lower case) whose coefficients are
+#: OpenCV's, which :func:`undistort_depth` undoes: ROS's ``plumb_bob`` and
+#: ``rational_polynomial`` and RealSense's ``Brown Conrady``.
+OPENCV_MODELS = ("plumb_bob", "rational_polynomial", "brown conrady", "brown_conrady")
 
 
 def check_distortion(distortion: Any, name: str = "distortion") -> tuple[float, ...]:

@@ -24,7 +24,7 @@ import numpy as np
 
 from ._png import decode_png, encode_png, read_png
 from ._validate import check_depth, check_normals, check_positive
-from .camera import Intrinsics, as_intrinsics, lens_distortion
+from .camera import OPENCV_MODELS, Intrinsics, as_intrinsics, lens_distortion
 
 __all__ = [
     "OUTPUT_SUFFIXES",
@@ -392,8 +392,8 @@ class CameraFile:
         (:func:`depthnormals.undistort_depth`).
     ros_distortion : tuple of float
         A ROS ``camera_info``'s non-zero ``D`` (``D`` / ``d`` / ``distortion_coefficients``,
-        model ``plumb_bob`` or ``rational_polynomial``), which is **not** applied: ROS depth
-        topics are taken as rectified (``image_rect``); the command line says so and names
+        of one of OpenCV's models, :data:`depthnormals.camera.OPENCV_MODELS`), which is **not**
+        applied: ROS depth topics are taken as rectified (``image_rect``); the command line says so and names
         ``--distortion`` for an ``image_raw`` stream. () when absent, all 0, or of another
         model.
     ros_other_lens : str
@@ -583,10 +583,10 @@ def _ros_lens(data: dict) -> tuple[tuple[float, ...], str]:
         return (), model
     if not np.any(d != 0):  # none, or all 0 (most depth cameras' camera_info)
         return (), ""
-    if model.lower() not in ("plumb_bob", "rational_polynomial"):
+    if model.lower() not in OPENCV_MODELS:
         return (), model
     try:
-        return lens_distortion(tuple(float(x) for x in d)), ""
+        return lens_distortion(d), ""
     except (TypeError, ValueError):
         return (), model
 

@@ -185,7 +185,8 @@ def read_settings(args: argparse.Namespace, camera: Any) -> ReadSettings:
         print(f"depthnormals estimate: note: {camera.source} gives a lens distortion of model "
               f"{other!r} (ROS camera_info), which is not applied: ROS depth topics are taken as "
               "rectified (image_rect), and depthnormals.undistort_depth cannot undo it as given "
-              "(OpenCV's plumb_bob / rational_polynomial, 4, 5, 8 or 12 finite coefficients); "
+              "(OpenCV's models, plumb_bob / rational_polynomial / Brown Conrady, with 4, 5, 8 or "
+              "12 finite coefficients); "
               "rectify an image_raw stream first", file=sys.stderr)
     return ReadSettings(scale, tuple(invalid), max_depth, lens_distortion(dist))
 

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from ..camera import Intrinsics, check_distortion, undistort_depth
+from ..camera import OPENCV_MODELS, Intrinsics, check_distortion, undistort_depth
 from ._common import depth_mask, optional_module, resolve_intrinsics
 from ._frame import Frame
 
@@ -37,8 +37,6 @@ __all__ = ["DEPTH_ENCODINGS", "is_rosbag", "read_rosbag"]
 #: Image encodings read as depth, with the metres per stored unit of each (REP 118); a
 #: RealSense recording's ``Depth Units`` option overrides the 16-bit ones' scale.
 DEPTH_ENCODINGS = {"16UC1": 0.001, "mono16": 0.001, "32FC1": 1.0}
-#: Distortion models that :func:`depthnormals.undistort_depth` undoes (OpenCV's).
-OPENCV_MODELS = ("plumb_bob", "rational_polynomial", "brown conrady", "brown_conrady")
 _ROS1_MAGIC = b"#ROSBAG V2.0\n"
 _MCAP_MAGIC = b"\x89MCAP0\r\n"
 _PNG = b"\x89PNG\r\n\x1a\n"
