@@ -3,6 +3,7 @@ the rest, over the pixels every method covers (docs/benchmarks.md section 30).""
 
 from __future__ import annotations
 
+import json
 import types
 
 import numpy as np
@@ -46,3 +47,30 @@ def test_thin_table_scores_the_thin_part_on_the_pixels_every_method_covers(load_
 def test_every_must_be_positive(load_benchmark, tmp_path):
     with pytest.raises(SystemExit):
         load_benchmark("thin_faces").main([str(tmp_path), "--every", "0"])
+
+
+def test_main_scores_every_kth_view_and_writes_the_table(tmp_path, load_benchmark, capsys):
+    """The script on a small generated set (one room, two views, clean and kinect_v1):
+    ``--every 2`` scores the first view's variants only, the JSON holds the table
+    :func:`thin_table` gives on those frames, and both columns are printed."""
+    from depthnormals.camera import Intrinsics
+    from depthnormals.datasets.synthetic import read_synthetic
+    from depthnormals.synth import generate
+
+    data = tmp_path / "set"
+    generate(data, indoor=1, outdoor=0, views=2, seed=3, K=Intrinsics(91.375, 91.375, 63.5, 52.5),
+             size=(106, 128), progress=False, noise=("kinect_v1",))
+    bench = load_benchmark("thin_faces")
+    out = tmp_path / "thin.json"
+    assert bench.main([str(data), "--methods", "fals", "--every", "2", "--json", str(out)]) == 0
+    got = json.loads(out.read_text())
+    assert got["methods"] == ["3f2n+", "fals"] and got["every"] == 2
+    first = [f for f in read_synthetic(data) if f.name == "0000"]
+    assert {f.group.rsplit("/", 1)[-1] for f in first} == {"clean", "kinect_v1"}
+    want = bench.thin_table(first, ["3f2n+", "fals"])
+    for v in ("clean", "kinect_v1"):
+        for part in ("thin", "resolved"):
+            assert got["columns"][v][part] == want[v][part].means()  # JSON keeps floats exact
+    assert got["columns"]["kinect_v1"]["resolved"]["pixels"] > 5000
+    printed = capsys.readouterr().out
+    assert "clean: thin part" in printed and "kinect_v1: thin part" in printed
