@@ -642,6 +642,7 @@ def speed(method: str, synth: Path | None, real: str, repeats: int = 25) -> None
             seen.add(v)
             frames.append((f"synth/{v}", f.depth, f.K))
     total = [0.0, 0.0]
+    vga: list[float] = []  # the ratios of the 640x480 frames (the size)
     for name, d, K in frames:
         fns = (partial(dn.estimate_normals, d, K, method=method),
                partial(dn.estimate_normals, d, K, method=method, return_uncertainty=True))
@@ -657,10 +658,15 @@ def speed(method: str, synth: Path | None, real: str, repeats: int = 25) -> None
         ma, mb = (float(np.median(t)) for t in ts)
         total[0] += a
         total[1] += b
+        if d.shape == (480, 640):
+            vga.append(b / a)
         print(f"{name:42s} {d.shape[1]}x{d.shape[0]}  {a * 1e3:7.2f} ms  with the map "
               f"{b * 1e3:7.2f} ms  x{b / a:.2f} (medians x{mb / ma:.2f})")
     if frames:
         print(f"all frames: x{total[1] / total[0]:.2f}")
+    if vga:
+        print(f"640x480 frames: x{min(vga):.2f}-x{max(vga):.2f} (median x{np.median(vga):.2f}, "
+              f"{sum(round(r, 2) <= 1.3 for r in vga)} of {len(vga)} at or under x1.30)")
 
 
 SYNTH_KINDS = ("synth", "synth-planes", "synth-off", "synth-asreal", "synth-crease", "synth-jump",

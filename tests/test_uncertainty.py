@@ -1789,3 +1789,25 @@ def test_calibration_bench_surface_floor_reads_the_depths_own_bend(load_benchmar
     for u in (60, 80, 120, 150):  # the fit's tilt follows the slope 2 c x (the window's mean)
         want = np.degrees(np.arctan(2 * c * abs(x[u])))
         assert bowed[v, u] == pytest.approx(want, abs=0.05 + 0.1 * want), (u, bowed[v, u], want)
+
+
+def test_calibration_bench_speed_reads_every_frame_and_the_640x480_ones(load_benchmark, shared_data,
+                                                                          capsys):
+    """``--speed``: one line per real frame with both times and their ratio, the ratio over all
+    frames, and the 640x480 frames' range with how many are at or under the issue's 1.3x (the
+    ten Kinect v1 frames of ``real-sensors``; KITTI's 1242x375 is not among them). Times are
+    not asserted (a shared machine); the counts and the lines are."""
+    import re
+
+    bench = load_benchmark("uncertainty_calibration")
+    bench.speed("3f2n+", None, str(shared_data / "real-sensors"), repeats=1)
+    out = capsys.readouterr().out.splitlines()
+    frames = [s for s in out if s.startswith("real/")]
+    assert len(frames) == 11 and sum("640x480" in s for s in frames) == 10
+    ratios = [float(re.search(r" x(\d+\.\d+) \(medians", s).group(1)) for s in frames if "640x480" in s]
+    m = re.fullmatch(r"640x480 frames: x(\d\.\d\d)-x(\d\.\d\d) \(median x\d\.\d\d, (\d+) of 10 at or under "
+                     r"x1\.30\)", out[-1])
+    assert m is not None, out[-1]
+    assert float(m.group(1)) == min(ratios) and float(m.group(2)) == max(ratios)
+    assert int(m.group(3)) == sum(r <= 1.3 for r in ratios)
+    assert out[-2].startswith("all frames: x")
