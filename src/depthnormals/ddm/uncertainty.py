@@ -902,12 +902,10 @@ def _far_chords(x, y, t, far, has_far, far_d, acc, cnt):
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _cross_chords(x, y, t, below, above, has_below, has_above, d, ang, ok, acc, cnt):
+def _row_pairs(x, y, t, d, ang, ok, acc, cnt):
     """``acc``, ``cnt`` (reset here): the sum (radians) and count of the angles between the
-    row's normals ``x, y, t`` and the finite ones ``d`` to the right and left, and of the rows
-    ``d`` below and above (``below``, ``above`` (3, W), read where ``has_below``,
-    ``has_above``); ``ang``, ``ok``: scratch rows. Each left-right pair's angle is computed
-    once."""
+    row's normals ``x, y, t`` and the finite ones ``d`` to the right and left (each pair's
+    angle computed once); ``ang``, ``ok``: scratch rows."""
     w = x.size
     acc[:] = 0.0
     cnt[:] = 0.0
@@ -916,6 +914,13 @@ def _cross_chords(x, y, t, below, above, has_below, has_above, d, ang, ok, acc, 
         _angle_into(x[:hi], y[:hi], t[:hi], x[d:], y[d:], t[d:], ang[:hi], ok[:hi])
         _add_into(ang[:hi], ok[:hi], acc[:hi], cnt[:hi])
         _add_into(ang[:hi], ok[:hi], acc[d:], cnt[d:])
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _cross_chords(x, y, t, below, above, has_below, has_above, d, ang, ok, acc, cnt):
+    """:func:`_row_pairs`, then the angles to the normals of the rows ``d`` below and above
+    (``below``, ``above`` (3, W), read where ``has_below``, ``has_above``)."""
+    _row_pairs(x, y, t, d, ang, ok, acc, cnt)
     if has_below:
         _chord_into(x, y, t, below[0], below[1], below[2], acc, cnt)
     if has_above:
@@ -928,14 +933,7 @@ def _cross_sums(x, y, t, d, below, below_ok, above, above_ok, has_below, has_abo
     """:func:`_cross_chords` with the angles to the rows ``d`` below and above already
     computed (``below``, ``above``, with ``below_ok``, ``above_ok`` (1 or 0) as
     :func:`_angle_into` gives them): the same sums, in the same order."""
-    w = x.size
-    acc[:] = 0.0
-    cnt[:] = 0.0
-    if d < w:
-        hi = w - d
-        _angle_into(x[:hi], y[:hi], t[:hi], x[d:], y[d:], t[d:], ang[:hi], ok[:hi])
-        _add_into(ang[:hi], ok[:hi], acc[:hi], cnt[:hi])
-        _add_into(ang[:hi], ok[:hi], acc[d:], cnt[d:])
+    _row_pairs(x, y, t, d, ang, ok, acc, cnt)
     if has_below:
         _add_into(below, below_ok, acc, cnt)
     if has_above:
