@@ -132,10 +132,12 @@ def test_the_support_rows_add_the_bend_in_quadrature_keep_nan_and_cap():
     grid = 10.0 * rng.random((2, 5))
     grid[0, 0] = 500.0
 
+    by_row = np.ascontiguousarray(n.transpose(0, 2, 1))  # (H, 3, W), as the branch hands it
+
     def run(b):
         out = np.empty((h, w), np.float32)
         for v0, v1 in ((0, 4), (4, h)):
-            U._support_rows(v0, v1, z, n, (1.0, 2.0, 0), ctx, b, out)
+            U._support_rows(v0, v1, z, by_row, (1.0, 2.0, 0), ctx, b, out)
         return out
 
     without = run(bend.bend_term(np.zeros((1, 1)), 8, 0.0, w))

@@ -322,9 +322,11 @@ def test_fast_choice_agrees_with_the_per_pixel_reference(radius):
     args = support.choice_inputs(z, cam.fx, cam.fy, cam.cx, cam.cy, prof)
     fast = np.empty((*z.shape, 3), dtype=np.float32)
     fast_dev = np.empty(z.shape, dtype=np.float32)
-    run_rows(support._choose_least_rows, z.shape[0], z, *args, fast, fast_dev, min_rows=16)
+    rows = np.empty((z.shape[0], 3, z.shape[1]), dtype=np.float32)
+    run_rows(support._choose_least_rows, z.shape[0], z, *args, fast, fast_dev, rows, min_rows=16)
     ref, ref_dev = _reference_choice(z, args)
     assert np.array_equal(fast, ref, equal_nan=True)
+    assert np.array_equal(rows, fast.transpose(0, 2, 1), equal_nan=True)  # the same, by row
     assert np.allclose(fast_dev, ref_dev, rtol=1e-5, atol=1e-5)
     # some pixels of the box's faces deviate, most do not
     assert 0.0 < np.mean(fast_dev > support.DEVIATION) < 0.05
@@ -530,7 +532,8 @@ def test_no_fallback_below_its_radius():
     branch hands the map an infinite limit (no pixel fell back, whatever it deviates), and its
     normals are the choice's after the face switch; from radius 3 on the limit is DEVIATION.
     The map's copy of the choice is taken before the switch either way (until session 39,
-    where none fell back it was the output itself, which the switch changes in place)."""
+    where none fell back it was the output itself, which the switch changes in place); since
+    session 40 the choice writes it by row, (H, 3, W)."""
     import dataclasses
 
     from depthnormals.ddm.faceswitch import switch_faces
@@ -546,10 +549,12 @@ def test_no_fallback_below_its_radius():
         scores: list = []
         out = support.support_select(zp, cam.fx, cam.fy, cam.cx, cam.cy, p.sigma, profile=prof,
                                      out_scores=scores)
-        before, dev, got = scores[2], scores[3], scores[4]
+        rows, dev, got = scores[2], scores[3], scores[4]
         assert got == limit
         assert (dev > support.DEVIATION).any()  # deviating pixels either way
-        assert not np.shares_memory(before, out)
+        assert rows.shape == (zp.shape[0], 3, zp.shape[1])  # by row, for the map
+        assert not np.shares_memory(rows, out)
+        before = np.ascontiguousarray(rows.transpose(0, 2, 1))
         if limit == np.inf:
             switched, _, _ = switch_faces(zp, before.copy(), cam.fx, cam.fy, cam.cx, cam.cy,
                                           span=support.SWITCH_SPAN)

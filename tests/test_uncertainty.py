@@ -668,11 +668,11 @@ def test_offsets_match_numpy_and_read_the_tilt(span):
 
 def _support_row(w):
     """One row of ``w`` pixels for ``_support_rows``: depth 2 m, normals facing the camera but
-    the last (NaN), no jumps or steps."""
+    the last (NaN), by row ((1, 3, W), as the branch hands them), no jumps or steps."""
     z = np.full((1, w), 2.0, np.float32)
-    n = np.zeros((1, w, 3), np.float32)
-    n[..., 2] = -1.0
-    n[0, w - 1] = np.nan
+    n = np.zeros((1, 3, w), np.float32)
+    n[0, 2] = -1.0
+    n[0, :, w - 1] = np.nan
     return z, n, np.zeros((2, 1, w), np.float32)
 
 
@@ -911,16 +911,16 @@ def test_offset_scales_read_the_percentile_over_the_growth():
     offs = rng.random((2, h, w)).astype(np.float32)
     offs[1] *= 3.0
     offs[:, ::4] = 0.0
-    got = U._offset_scales(z, n, offs, 1.0, 4)  # sqrt(growth) = z / zref
+    got = U._offset_scales(z, n[..., 0], offs, 1.0, 4)  # sqrt(growth) = z / zref
     st = U.MEDIAN_STEP
     for i in range(2):
         s = (offs[i] / z)[::st, ::st]
         s = s[np.isfinite(n[::st, ::st, 0]) & (s > 0)]
         assert got[i] == pytest.approx(np.percentile(s, U.DEPTH_QUANTILE), rel=1e-5)
     assert got[1] > 2.0 * got[0]
-    flat = U._offset_scales(z, n, offs, 1.0, 0)  # no growth
+    flat = U._offset_scales(z, n[..., 0], offs, 1.0, 0)  # no growth
     assert flat[0] > got[0]
-    assert np.all(U._offset_scales(z, n, np.zeros_like(offs), 1.0, 4) == 0.0)
+    assert np.all(U._offset_scales(z, n[..., 0], np.zeros_like(offs), 1.0, 4) == 0.0)
 
 
 def test_edge_integrals_match_numpy():

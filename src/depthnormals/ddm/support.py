@@ -586,6 +586,21 @@ def choose_pixel(z, fits, big, shift, gates, cam, v, u):
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
+def _planar_row(normals, v, out3):
+    """Row ``v`` of ``normals`` (H, W, 3) C-contiguous into ``out3`` (3, W), read as one flat
+    row (a constant stride of 3: the loop vectorises, 3.6x faster than 3-d indexing)."""
+    w = normals.shape[1]
+    r = normals[v].reshape(3 * w)
+    x = out3[0]
+    y = out3[1]
+    t = out3[2]
+    for u in range(w):
+        x[u] = r[3 * u]
+        y[u] = r[3 * u + 1]
+        t[u] = r[3 * u + 2]
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def _put_facing(out, v, u, x, y, t, ray, ok):
     """``out[v, u] = (x, y, t)`` turned toward the pixel's ray ``(ray_x, ray_y, 1)``, or NaN
     where not ``ok``."""
@@ -613,7 +628,7 @@ def _least(a, out_best, out_k, k):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _choose_least_rows(v0, v1, z, fits, big, shift, gates, cam, out, out_dev):
+def _choose_least_rows(v0, v1, z, fits, big, shift, gates, cam, out, out_dev, out_rows):
     """Rows ``[v0, v1)`` of the window choice.
 
     ``fits = (normals (3, H, W), scores (H, W), centres (H, W))`` of the radius-``shift``
@@ -629,7 +644,9 @@ def _choose_least_rows(v0, v1, z, fits, big, shift, gates, cam, out, out_dev):
     (the centred one wins ties). Writes ``out`` (H, W, 3): unit normals turned toward the
     pixel's ray, NaN at invalid depth or without a fit; ``out_dev`` (H, W): how many standard
     deviations the pixel's depth lies off the chosen window's plane (:func:`_deviation`; 0
-    where it has no normal). Every loop runs along a row (vectorised); the choice is one small
+    where it has no normal); ``out_rows`` (H, 3, W): the same normals by row
+    (:func:`_planar_row`, each row while it is at hand), for the uncertainty map; a (0, 3, W)
+    array: none. Every loop runs along a row (vectorised); the choice is one small
     index a pixel."""
     fit_n, score, cen = fits
     big_n, big_s, big_c = big
@@ -699,6 +716,8 @@ def _choose_least_rows(v0, v1, z, fits, big, shift, gates, cam, out, out_dev):
         for u in range(w):  # facing the pixel's ray; NaN at invalid depth or without a fit
             _put_facing(out, v, u, gx[u], gy[u], gz[u], (rx[u], ry),
                         (zrow[u] == zrow[u]) & (best[u] < np.inf))
+        if out_rows.shape[0] == h:
+            _planar_row(out, v, out_rows[v])
         _deviation_row(zrow, (gx, gy, gz), gc, (cxr, cyr), rx, ry, fx, un, fac, best,
                        out_dev[v])
 
@@ -761,17 +780,19 @@ def _choose(z: np.ndarray, zc: np.ndarray, args: tuple, out: np.ndarray, min_row
     window's plane (:func:`_fallback_rows`, on the depth ``z``) past :data:`DEVIATION` where
     the choice's radius exceeds :data:`FALLBACK_RADIUS` (else none falls back). Returns the
     deviations (H, W; 0 where ``z`` is invalid, which ``zc`` may fill), the limit past which
-    pixels fell back (inf: none can) and, with ``keep``, a copy of the normals of the choice
-    before the fallback (else None): a copy even where none fell back, since the face switch
-    then changes ``out`` in place (session 39: where none fell back the map read the switched
-    normals, elsewhere the choice's)."""
+    pixels fell back (inf: none can) and, with ``keep``, the normals of the choice before the
+    fallback by row, (H, 3, W) (else None), written by the choice itself: a copy even where
+    none fell back, since the face switch then changes ``out`` in place (session 39: where
+    none fell back the map read the switched normals, elsewhere the choice's)."""
+    h, w = z.shape
     dev = np.empty(z.shape, dtype=np.float32)
-    run_rows(_choose_least_rows, z.shape[0], zc, *args, out, dev, min_rows=min_rows)
+    rows = np.empty((h if keep else 0, 3, w), dtype=np.float32)
+    run_rows(_choose_least_rows, h, zc, *args, out, dev, rows, min_rows=min_rows)
     if zc is not z:
         dev[np.isnan(z)] = 0.0
     limit = DEVIATION if args[2] > FALLBACK_RADIUS else np.inf
     falls = bool((dev > limit).any())
-    before = out.copy() if keep else None
+    before = rows if keep else None
     if falls:
         cam = args[4]
         small = box_fit_windows(z, *cam, FALLBACK_RADIUS)
@@ -812,8 +833,8 @@ def support_select(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
     (:func:`_fallback_rows`). ``out_scores``: a list that receives, on the grid of the choice
     (every second row and column from :data:`HALF_RADIUS` on), the residual variances of the
     chosen radius's windows (footprints^2 of the profile), their shift, the normals chosen
-    before the fallback, the deviations, the limit past which pixels fell back (inf where the
-    radius allows none), whether that grid is the half one, the normals on that grid after
+    before the fallback by row ((H, 3, W)), the deviations, the limit past which pixels fell
+    back (inf where the radius allows none), whether that grid is the half one, the normals on that grid after
     the fallback and the face switch (the output, but not yet turned toward each pixel's ray
     on the half grid) and the face switch's decisions
     (:func:`depthnormals.ddm.faceswitch.switch_faces`), for the uncertainty map

@@ -133,6 +133,7 @@ from .support import (
     PAIR_TO_ERROR,
     SupportProfile,
     _gate_growth,
+    _planar_row,
     support_profile,
     support_select,
 )
@@ -633,7 +634,7 @@ def _interior_error(normals, z, score, prof: SupportProfile) -> float:
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _support_rows(v0, v1, z, normals, model, ctx, bend, out):
+def _support_rows(v0, v1, z, planar, model, ctx, bend, out):
     """Rows ``[v0, v1)`` of the measured support's map (degrees) into ``out`` (H, W).
 
     ``model = (e_i, zref, half)``: the interior error ``e_i`` (degrees at ``zref``), growing
@@ -647,8 +648,8 @@ def _support_rows(v0, v1, z, normals, model, ctx, bend, out):
     at least :data:`LEVEL_FLOOR` ``lev``, plus the ramp :data:`DEPTH_RAMP` of the offsets,
     times :data:`FALLBACK_SCALE` where the pixel fell back, then the bend term in quadrature
     (``bend``: :func:`depthnormals.ddm.bend.bend_term` on this grid), at most
-    :data:`MAX_ERROR`; NaN where the normal is NaN.
-    Every loop runs along a row."""
+    :data:`MAX_ERROR`; NaN where the normal is NaN (``planar``: the branch's choice by row,
+    (H, 3, W)). Every loop runs along a row."""
     e_i, zref, half = model
     s1, far, sub, sh, offs, inv_q, dev, limit = ctx
     w = z.shape[1]
@@ -715,8 +716,9 @@ def _support_rows(v0, v1, z, normals, model, ctx, bend, out):
         bend_row(bend, v, sq, b2)
         for u in range(w):  # (apart from the strided loop below: vectorised)
             lev[u] = np.sqrt(lev[u] * lev[u] + b2[u])
+        nxr = planar[v, 0]
         for u in range(w):
-            nx = normals[v, u, 0]
+            nx = nxr[u]
             m = cap if lev[u] > cap else lev[u]
             out[v, u] = m if nx == nx else nan
 
@@ -1133,19 +1135,10 @@ def _box_row(ii, v, r, lo, hi, inv, out):
         out[u] = (rb[d] - ra[d] - rb[c] + ra[c]) * (iv * inv[u])
 
 
-def _by_row(ng) -> np.ndarray:
-    """The normals ``ng`` (H, W, 3) laid out by row, (H, 3, W) float32 (:func:`_by_rows`; 2x
-    numpy's strided transpose)."""
-    h = ng.shape[0]
-    planar = np.empty((h, 3, ng.shape[1]), dtype=np.float32)
-    run_rows(_by_rows, h, np.ascontiguousarray(ng, dtype=np.float32), planar, min_rows=16)
-    return planar
-
-
-def _context(zg, ng, planar, big: int, cam: tuple, shift: int = 1, *, growth: tuple) -> tuple:
+def _context(zg, planar, big: int, cam: tuple, shift: int = 1, *, growth: tuple) -> tuple:
     """What the measured support's map reads besides its level, on the grid of its choice
-    (depth ``zg``, NaN where invalid, normals ``ng`` and the same by row ``planar``
-    (:func:`_by_row`), camera ``cam`` of that grid): the mean
+    (depth ``zg``, NaN where invalid, normals by row ``planar`` (H, 3, W), camera ``cam`` of
+    that grid): the mean
     angle of the normals :data:`NEAR_SPAN` away (H, W) and ``big`` away (1, H, W), each to
     the right, left, below and above (:func:`_spreads_rows`), :func:`_densities` on every
     ``2^shift``-th row and column of that grid, and how far the pixels' planes miss their
@@ -1158,18 +1151,19 @@ def _context(zg, ng, planar, big: int, cam: tuple, shift: int = 1, *, growth: tu
     offsets = np.empty((len(DEPTH_SPANS), h, w), dtype=np.float32)
     run_rows(_offsets_rows, h, zg, planar, DEPTH_SPANS, tuple(float(x) for x in cam), offsets,
              min_rows=16)
-    scales = _offset_scales(zg, ng, offsets, *growth)
+    scales = _offset_scales(zg, planar[:, 0], offsets, *growth)
     inv_q = tuple(1.0 / q if q > 0.0 else 0.0 for q in scales)
     return spreads[0], spreads[1:], _densities(zg, big, shift), shift, offsets, inv_q
 
 
-def _offset_scales(zg, ng, offsets, zref: float, half: int) -> np.ndarray:
+def _offset_scales(zg, nx, offsets, zref: float, half: int) -> np.ndarray:
     """The frame's scale of each span's offsets (:data:`DEPTH_SPANS`): the
     :data:`DEPTH_QUANTILE` th percentile of ``o / sqrt(growth)`` (``(z / zref)^(half / 4)``, 1
     where the depth is invalid) over every :data:`MEDIAN_STEP`-th row and column where the
-    normal is valid and the offset positive; 0 where there is none."""
+    normal is valid (``nx`` (H, W), a component of the normals, NaN where they are) and the
+    offset positive; 0 where there is none."""
     izref = 1.0 / zref if zref > 0.0 else 0.0
-    return np.array([_scale_of(offsets[i], zg, ng[..., 0], MEDIAN_STEP, np.float32(izref), half,
+    return np.array([_scale_of(offsets[i], zg, nx, MEDIAN_STEP, np.float32(izref), half,
                                DEPTH_QUANTILE) for i in range(len(DEPTH_SPANS))])
 
 
@@ -1219,29 +1213,6 @@ def _box_planes(ij, ist, r, out_j, out_s):
     for v in range(h):
         _box_row(ij, v, r, c_lo, c_hi, inv, out_j[v])
         _box_row(ist, v, r, c_lo, c_hi, inv, out_s[v])
-
-
-@nb.njit(cache=True, error_model="numpy", inline="always")
-def _planar_row(normals, v, out3):
-    """Row ``v`` of ``normals`` (H, W, 3) C-contiguous into ``out3`` (3, W), read as one flat
-    row (a constant stride of 3: the loop vectorises, 3.6x faster than 3-d indexing)."""
-    w = normals.shape[1]
-    r = normals[v].reshape(3 * w)
-    x = out3[0]
-    y = out3[1]
-    t = out3[2]
-    for u in range(w):
-        x[u] = r[3 * u]
-        y[u] = r[3 * u + 1]
-        t[u] = r[3 * u + 2]
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _by_rows(v0, v1, normals, out):
-    """Rows ``[v0, v1)`` of ``normals`` (H, W, 3) C-contiguous into ``out`` (H, 3, W)
-    (:func:`_planar_row`)."""
-    for v in range(v0, v1):
-        _planar_row(normals, v, out[v])
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -1409,8 +1380,8 @@ def _support_branch(z, cam, sigma, prof):
         cam_g, big_g, rows = (0.5 * fx, 0.5 * fy, 0.5 * cx, 0.5 * cy), big // 2, 8
     else:
         zg, cam_g, big_g, rows = z, cam, big, 16
-    planar = _by_row(chosen)
-    ctx = (*_context(zg, chosen, planar, big_g, cam_g, growth=model[1:]), dev, limit)
+    planar = chosen  # (H, 3, W), by row
+    ctx = (*_context(zg, planar, big_g, cam_g, growth=model[1:]), dev, limit)
     grid = np.empty(zg.shape, dtype=np.float32)  # (a half-grid cell of invalid depth: e_i)
     # with the product, how far the surface bends over tens of pixels (a sensor's own
     # deformation of a plane, which the normals follow; ddm/bend.py) in quadrature
@@ -1418,7 +1389,7 @@ def _support_branch(z, cam, sigma, prof):
     # pixels is BEND_STEP / 2 cells of the half grid)
     gs = BEND_STEP // 2 if halved else BEND_STEP
     bend = bend_term(bend_grid_by_rows(planar, zg, cam_g, step=gs), gs, BEND_SHARE, zg.shape[1])
-    run_rows(_support_rows, zg.shape[0], zg, chosen, model, ctx, bend, grid, min_rows=rows)
+    run_rows(_support_rows, zg.shape[0], zg, planar, model, ctx, bend, grid, min_rows=rows)
     # last, the crease floor of the edges between two cells that fell back (output normals)
     a, far, theta = CREASE_FLOOR
     edges = np.empty((2, *zg.shape), dtype=np.float32)
