@@ -834,9 +834,9 @@ def support_select(z: np.ndarray, fx: float, fy: float, cx: float, cy: float,
     (every second row and column from :data:`HALF_RADIUS` on), the residual variances of the
     chosen radius's windows (footprints^2 of the profile), their shift, the normals chosen
     before the fallback by row ((H, 3, W)), the deviations, the limit past which pixels fell
-    back (inf where the radius allows none), whether that grid is the half one, the normals on that grid after
-    the fallback and the face switch (the output, but not yet turned toward each pixel's ray
-    on the half grid) and the face switch's decisions
+    back (inf where the radius allows none), whether that grid is the half one, the normals
+    on that grid after the fallback and the face switch (the output, but not yet turned
+    toward each pixel's ray on the half grid) and the face switch's decisions
     (:func:`depthnormals.ddm.faceswitch.switch_faces`), for the uncertainty map
     (:mod:`depthnormals.ddm.uncertainty`); the normals do not change.
 
