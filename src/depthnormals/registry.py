@@ -210,9 +210,10 @@ def estimate_normals(depth: Any, K: Any, *, method: str = DEFAULT_METHOD,
         clutter narrower than the estimator's windows (shelves of books) it reads low: within
         3 px of faces at most 5 px across (risers, board edges, legs) the normals err 1.1-1.3x
         the map on Gaussian depth and 1.5-2.5x on sensor depth, where no estimator resolves
-        such faces (every one errs by 28-63 deg there), and on relief shallower than the
-        sensor's depth step (pleats, corrugation) they take the surface's mean normal, not the
-        facets' (docs/benchmarks.md, sections 17 and 30).
+        such faces (on Kinect v1, time-of-flight and active stereo depth every one errs by
+        28-63 deg there), and on relief shallower than the sensor's depth step (pleats,
+        corrugation) they take the surface's mean normal, not the facets' (docs/benchmarks.md,
+        sections 17 and 30).
     **options
         Keyword options of the chosen estimator (and, for ``"<name>+"``, of
         :func:`depthnormals.ddm.discontinuity_discrimination`). Unknown names raise TypeError.
