@@ -452,8 +452,8 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
     f2 = np.empty((2, w), dtype=f32)  # the row's densities (box)
     for a in range(max(0, v0 - back), min(h, v0 + ahead)):
         _planar_row(normals, a, ring[a % nr])
-    # the near spread's vertical pairs, each computed once (as :func:`_spreads_rows`): the
-    # angle of the pair (p, p + near_d) in row p % nv, and whether both normals are finite
+    # the near spread's vertical pairs, each computed once (:func:`_cross_sums`): the angle of
+    # the pair (p, p + near_d) in row p % nv, and whether both normals are finite
     nv = near_d + 1
     va = np.empty((nv, w), dtype=f32)
     vo = np.empty((nv, w), dtype=f32)
@@ -502,11 +502,8 @@ def _fit_error_rows(v0, v1, z, normals, score, shift, tiles, depth, big, cam, ou
         if apart and far_d > 0:
             _far_chords(x, y, t, ring[(v + far_d) % nr], v + far_d < h, far_d, acf, cnf)
         if near_d > 0:  # the near spread, in four directions (as :func:`_spreads_rows`)
-            if v + near_d < h:
-                b_ = ring[(v + near_d) % nr]
-                _angle_into(x, y, t, b_[0], b_[1], b_[2], va[v % nv], vo[v % nv])
-            _cross_sums(x, y, t, near_d, va[v % nv], vo[v % nv], va[(v - near_d) % nv],
-                        vo[(v - near_d) % nv], v + near_d < h, v >= near_d, ra, rk, acc, cnt)
+            _cross_sums(x, y, t, ring[(v + near_d) % nr], v, h, near_d, va, vo, ra, rk, acc,
+                        cnt)
         if half > 0:  # (z / zref)^(half / 2), without a transcendental function
             for u in range(w):
                 tz = np.float64(z[v, u]) * izref
@@ -916,15 +913,20 @@ def _far_chords(x, y, t, far, has_far, far_d, acc, cnt):
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _cross_sums(x, y, t, d, below, below_ok, above, above_ok, has_below, has_above, ang, ok,
-                acc, cnt):
+def _cross_sums(x, y, t, below, v, h, d, va, vo, ang, ok, acc, cnt):
     """``acc``, ``cnt`` (reset here): the sum (radians) and count of the angles between the
-    row's normals ``x, y, t`` and the finite ones ``d`` to the right and left (each pair's
-    angle computed once; ``ang``, ``ok``: scratch rows), then below and above: those angles
-    already computed (``below``, ``above`` (W), with ``below_ok``, ``above_ok`` (1 or 0) as
-    :func:`_angle_into` gives them; each vertical pair once, for the row above it and the row
-    below it), added where ``has_below``, ``has_above``."""
+    normals ``x, y, t`` of row ``v`` (of ``h``) and the finite ones ``d`` to the right and
+    left (each pair's angle computed once; ``ang``, ``ok``: scratch rows), below and above.
+    Each vertical pair's angle is computed once too: the one with the row ``d`` below
+    (``below`` (3, W), read where ``v + d < h``) goes into row ``v % len(va)`` of the ring
+    ``va`` (whether both are finite, 1 or 0, into ``vo``; :func:`_angle_into`) and is read
+    again by the row ``d`` below as its pair above; the caller fills the ring's pairs above
+    its first row."""
     w = x.size
+    nr = va.shape[0]
+    has_below = v + d < h
+    if has_below:
+        _angle_into(x, y, t, below[0], below[1], below[2], va[v % nr], vo[v % nr])
     acc[:] = 0.0
     cnt[:] = 0.0
     if d < w:
@@ -933,9 +935,9 @@ def _cross_sums(x, y, t, d, below, below_ok, above, above_ok, has_below, has_abo
         _add_into(ang[:hi], ok[:hi], acc[:hi], cnt[:hi])
         _add_into(ang[:hi], ok[:hi], acc[d:], cnt[d:])
     if has_below:
-        _add_into(below, below_ok, acc, cnt)
-    if has_above:
-        _add_into(above, above_ok, acc, cnt)
+        _add_into(va[v % nr], vo[v % nr], acc, cnt)
+    if v >= d:
+        _add_into(va[(v - d) % nr], vo[(v - d) % nr], acc, cnt)
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -971,12 +973,8 @@ def _spreads_rows(v0, v1, planar, near_d, far_d, out):
             _angle_into(a[0], a[1], a[2], b[0], b[1], b[2], va[p % nr], vo[p % nr])
         for v in range(v0, v1):
             row = planar[v]
-            x, y, t = row[0], row[1], row[2]
-            if v + d < h:
-                b = planar[v + d]
-                _angle_into(x, y, t, b[0], b[1], b[2], va[v % nr], vo[v % nr])
-            _cross_sums(x, y, t, d, va[v % nr], vo[v % nr], va[(v - d) % nr],
-                        vo[(v - d) % nr], v + d < h, v >= d, ang, ok, acc, cnt)
+            _cross_sums(row[0], row[1], row[2], planar[min(v + d, h - 1)], v, h, d, va, vo, ang,
+                        ok, acc, cnt)
             _mean_degrees(acc, cnt, out[k, v])
 
 
