@@ -393,9 +393,9 @@ class CameraFile:
     ros_distortion : tuple of float
         A ROS ``camera_info``'s non-zero ``D`` (``D`` / ``d`` / ``distortion_coefficients``,
         of one of OpenCV's models, :data:`depthnormals.camera.OPENCV_MODELS`), which is **not**
-        applied: ROS depth topics are taken as rectified (``image_rect``); the command line says so and names
-        ``--distortion`` for an ``image_raw`` stream. () when absent, all 0, or of another
-        model.
+        applied: ROS depth topics are taken as rectified (``image_rect``); the command line
+        says so and names ``--distortion`` for an ``image_raw`` stream. () when absent, all 0,
+        or of another model.
     ros_other_lens : str
         The ``distortion_model`` of a ROS ``camera_info`` whose non-zero ``D`` is of a model
         :func:`depthnormals.undistort_depth` cannot undo (``equidistant``, a fisheye) or does
